@@ -1,0 +1,1 @@
+"""File input/output: DNG read/write, image output, SIDD .MAT files."""
