@@ -1,0 +1,1 @@
+"""Datasets and evaluation: denoiser benchmark, noise estimation, on-the-fly training data."""
