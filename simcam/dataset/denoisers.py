@@ -68,21 +68,39 @@ Denoiser = Callable[[np.ndarray, BlockInfo], np.ndarray]
 
 # ------------------------------------------------------------------------------- helpers
 def block_nlf(noisy: np.ndarray, info: BlockInfo) -> tuple[float, float]:
-    """The NLF of a raw block: ``info.nlf`` or estimated from the block (clipped fit)."""
+    """The NLF of a raw block: ``info.nlf``, else estimated from the block (clipped fit,
+    :func:`~simcam.dataset.noise_estimation.estimate_nlf`), else -- for blocks too small
+    for level sets -- Chen's Gaussian sigma of the packed planes as ``(0, sigma^2)``."""
     if info.nlf is not None:
         return float(info.nlf[0]), float(info.nlf[1])
-    est = estimate_nlf(noisy)
-    b1, b2 = max(est.beta1, 1e-12), est.beta2
-    return b1, b2
+    try:
+        est = estimate_nlf(noisy)
+        return max(est.beta1, 0.0), est.beta2
+    except DatasetError:
+        planes = pack(np.asarray(noisy, np.float64))
+        return 0.0, float(np.mean([estimate_sigma(p, patch=min(8, min(p.shape)), stride=1) ** 2 for p in planes]))
+
+
+def _gaussian_only(beta1: float, beta2: float) -> bool:
+    # signal-dependent part negligible (below 1e-4 of the variance at full scale): plain scaling
+    return beta1 <= 1e-4 * max(beta1 + beta2, 1e-30)
 
 
 def gat_forward(x: np.ndarray, beta1: float, beta2: float) -> np.ndarray:
-    """Generalised Anscombe transform: noise of variance ``beta1 y + beta2`` -> unit variance."""
+    """Generalised Anscombe transform: noise of variance ``beta1 y + beta2`` -> unit variance.
+
+    ``(2 / beta1) sqrt(beta1 x + 3/8 beta1^2 + beta2)`` (Makitalo and Foi 2013);
+    ``x / sqrt(beta2)`` when the signal-dependent part is negligible.
+    """
+    if _gaussian_only(beta1, beta2):
+        return x / np.sqrt(max(beta2, 1e-30))
     return (2.0 / beta1) * np.sqrt(np.maximum(beta1 * x + 0.375 * beta1 * beta1 + beta2, 0.0))
 
 
 def gat_inverse(d: np.ndarray, beta1: float, beta2: float) -> np.ndarray:
     """Asymptotically unbiased inverse of :func:`gat_forward`: ``beta1 ((d/2)^2 - 1/8) - beta2/beta1``."""
+    if _gaussian_only(beta1, beta2):
+        return d * np.sqrt(max(beta2, 1e-30))
     return beta1 * ((d / 2.0) ** 2 - 0.125) - beta2 / beta1
 
 

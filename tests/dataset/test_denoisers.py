@@ -72,9 +72,9 @@ def test_dncnn_checkpoint_round_trip_and_training(tmp_path):
     rng = np.random.default_rng(0)
     clean = torch.from_numpy(rng.random((4, 4, 16, 16), dtype=np.float32) * 0.2 + 0.4)
     batches = [{"clean": clean, "noisy": clean + 0.05 * torch.randn(clean.shape)} for _ in range(4)]
-    losses = train_dncnn(model, batches, steps=30, lr=3e-3, log=None)
+    losses = train_dncnn(model, batches, steps=20, lr=3e-3, log=None)
     assert np.mean(losses[-5:]) < 0.5 * np.mean(losses[:5])
-    path = save_checkpoint(model, tmp_path / "m.pt", steps=40)
+    path = save_checkpoint(model, tmp_path / "m.pt", steps=20)
     name, den = get_denoiser(f"dncnn:{path}")
     x = rng.random((32, 32), dtype=np.float32)
     with torch.no_grad():
