@@ -1,0 +1,121 @@
+"""Noise samplers for on-the-fly training data (numpy; picklable; no torch).
+
+A sampler is a callable ``noise(clean, rng, info) -> (noisy, params)`` on a
+packed clean patch (4 x h x w float32, normalised raw, channels in
+:data:`simcam.cfa.PACK_OFFSETS` order); ``params`` is a flat dict of floats
+describing what was drawn (it ends up in the sample's ``meta``).
+``needs_spawn`` tells data loaders that the sampler uses a library with its
+own thread pool (onnxruntime) and needs ``spawn`` worker processes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..cfa import pack, unpack
+from ..errors import NoiseModelError
+
+
+@dataclass
+class GaussianNoise:
+    """Homoscedastic Gaussian noise, sigma ~ U(lo, hi) per sample (normalised raw units)."""
+
+    sigma: tuple[float, float] = (0.24 / 255, 11.51 / 255)  # seed section 6.5's range, 8-bit units / 255
+    clip: bool = False
+    needs_spawn: bool = False
+
+    def __call__(self, clean: np.ndarray, rng: np.random.Generator, info: dict | None = None):
+        s = float(rng.uniform(*self.sigma))
+        noisy = clean + np.float32(s) * rng.standard_normal(clean.shape, dtype=np.float32)
+        if self.clip:
+            np.clip(noisy, 0.0, 1.0, out=noisy)
+        return noisy, {"beta1": 0.0, "beta2": s * s}
+
+
+@dataclass
+class NLFNoise:
+    """Heteroscedastic Gaussian noise ``var = beta1 y + beta2`` (seed eq. 5.2), clipped to [0, 1] (eq. 5.3).
+
+    Parameters
+    ----------
+    nlfs : sequence of (beta1, beta2), optional
+        Camera NLFs to pick from uniformly (e.g. DNG NoiseProfiles of a set).
+    beta1, beta2 : (lo, hi), optional
+        Otherwise log-uniform ranges: beta1 drawn log-uniformly, then beta2
+        log-uniformly in its range.
+    clip : bool
+        Clip the noisy patch to [0, 1].
+    """
+
+    nlfs: Sequence[tuple[float, float]] | None = None
+    beta1: tuple[float, float] | None = None
+    beta2: tuple[float, float] | None = None
+    clip: bool = True
+    needs_spawn: bool = False
+
+    def __post_init__(self):
+        if self.nlfs is None and (self.beta1 is None or self.beta2 is None):
+            raise NoiseModelError("NLFNoise: expected nlfs=[(beta1, beta2), ...] or beta1=(lo, hi) and beta2=(lo, hi)")
+        if self.nlfs is not None:
+            self.nlfs = [(float(a), float(b)) for a, b in self.nlfs]
+
+    def draw(self, rng: np.random.Generator) -> tuple[float, float]:
+        if self.nlfs is not None:
+            return self.nlfs[int(rng.integers(len(self.nlfs)))]
+        b1 = float(np.exp(rng.uniform(np.log(self.beta1[0]), np.log(self.beta1[1]))))
+        b2 = float(np.exp(rng.uniform(np.log(self.beta2[0]), np.log(self.beta2[1]))))
+        return b1, b2
+
+    def __call__(self, clean: np.ndarray, rng: np.random.Generator, info: dict | None = None):
+        b1, b2 = self.draw(rng)
+        std = np.sqrt(np.maximum(np.float32(b1) * clean + np.float32(b2), 0.0, dtype=np.float32))
+        noisy = rng.standard_normal(clean.shape, dtype=np.float32)
+        noisy *= std
+        noisy += clean
+        if self.clip:
+            np.clip(noisy, 0.0, 1.0, out=noisy)
+        return noisy, {"beta1": b1, "beta2": b2}
+
+
+@dataclass
+class ModelNoise:
+    """Any simcam noise model with ``sample(clean, cond, rng) -> noisy`` on a mosaic.
+
+    ``conds`` are the conditions to pick from uniformly (dicts with e.g. ``iso``,
+    ``camera``); the CFA of the patch is added as ``cond["cfa"]``. Numeric
+    condition values are reported in the sample's meta.
+    """
+
+    model: Any
+    conds: Sequence[dict] = field(default_factory=lambda: [{}])
+    needs_spawn: bool = False
+
+    def __call__(self, clean: np.ndarray, rng: np.random.Generator, info: dict | None = None):
+        cond = dict(self.conds[int(rng.integers(len(self.conds)))])
+        cond.setdefault("cfa", (info or {}).get("cfa", "RGGB"))
+        noisy = self.model.sample(unpack(clean), cond, rng)
+        params = {k: float(v) for k, v in cond.items() if isinstance(v, (int, float))}
+        return pack(np.asarray(noisy, dtype=np.float32)), params
+
+
+@dataclass
+class PipelineNoise:
+    """Noise from a :class:`~simcam.pipeline.Pipeline` of input kind ``raw`` (e.g. one ``noise`` stage).
+
+    The pipeline's seed is drawn from the sample's generator, so the result
+    depends only on (seed, epoch, index).
+    """
+
+    pipeline: Any
+    needs_spawn: bool = False
+
+    def __call__(self, clean: np.ndarray, rng: np.random.Generator, info: dict | None = None):
+        from ..frame import CameraMeta, RawFrame
+
+        meta = (info or {}).get("camera_meta") or CameraMeta(cfa=(info or {}).get("cfa", "RGGB"))
+        frame = RawFrame(unpack(clean), meta, kind="raw")
+        out = self.pipeline(frame, seed=int(rng.integers(2**62)), epoch=0, index=0)
+        return pack(out.data), {}

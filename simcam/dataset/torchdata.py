@@ -1,0 +1,293 @@
+"""On-the-fly noisy/clean training patches for PyTorch (seed sections 6.5 and 7.2).
+
+:class:`NoisyPatchDataset` (map-style) and :class:`NoisyPatchStream`
+(iterable, over a file list) yield dicts ``{"noisy": 4 x p x p, "clean": 4 x p x p,
+"meta": {...}}`` of packed normalised raw (channel order (0,0), (0,1), (1,0),
+(1,1); with ``cfa_out="RGGB"`` the crop phase is chosen so that this is
+R, G, G, B whatever the source's pattern). Clean sources are raw mosaics
+(``.npy`` arrays, DNG files, arrays in memory) or sRGB images unprocessed to
+raw (:class:`~simcam.dataset.unprocess.Unprocess`, Brooks et al. 2019).
+
+Randomness: sample ``i`` of epoch ``e`` draws everything (source, crop,
+unprocessing, noise) from ``np.random.SeedSequence([seed, e, i])``, so the
+tensors do not depend on the number of workers; epochs differ.
+Use :func:`make_loader`: it picks the ``spawn`` start method where rawpy or
+onnxruntime are used and gives each worker one intra-op thread.
+
+Needs ``simcam[torch]``.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from ..cfa import check_pattern, pack, shift_pattern
+from ..errors import DatasetError, require_extra
+from ..frame import RawFrame
+from .unprocess import Unprocess
+
+torch = require_extra("torch", "torch")
+
+NoiseSampler = Callable[[np.ndarray, np.random.Generator, dict], tuple[np.ndarray, dict]]
+
+
+# ------------------------------------------------------------------------------- sources
+@dataclass
+class Source:
+    """One clean image: a normalised-raw mosaic (``kind="raw"``) or display sRGB (``kind="srgb"``)."""
+
+    data: np.ndarray | None = None
+    path: Path | None = None
+    kind: str = "raw"
+    cfa: str | None = "RGGB"
+
+    @property
+    def needs_spawn(self) -> bool:
+        return self.path is not None and self.path.suffix.lower() == ".dng"
+
+    def load(self) -> "Source":
+        if self.data is not None:
+            return self
+        p = self.path
+        suffix = p.suffix.lower()
+        if suffix == ".npy":
+            arr = np.load(p, allow_pickle=False)
+        elif suffix == ".dng":
+            from ..io.dng import read_dng  # type: ignore[attr-defined]
+            from ..stages.raw import Normalize
+
+            frame = read_dng(p)
+            frame = Normalize()(frame)
+            return Source(frame.data.astype(np.float32), p, "raw", frame.meta.cfa)
+        elif suffix in (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr"):
+            from ..io.images import read_image
+
+            arr = read_image(p)[..., :3]
+        else:
+            raise DatasetError(f"{p}: unsupported clean source {suffix!r}; expected .npy, .dng or an sRGB image")
+        arr = np.asarray(arr, dtype=np.float32)
+        if arr.ndim == 2:
+            return Source(arr, p, "raw", self.cfa)
+        if arr.ndim == 3 and arr.shape[2] == 3:
+            return Source(arr, p, "srgb", None)
+        raise DatasetError(f"{p}: expected an H x W mosaic or H x W x 3 image, got shape {arr.shape}")
+
+
+def as_sources(items: Sequence[Any], cfa: str = "RGGB") -> list[Source]:
+    """Paths, arrays (H x W mosaic with ``cfa``; H x W x 3 sRGB) or RawFrames -> sources."""
+    out = []
+    for k, it in enumerate(items):
+        if isinstance(it, Source):
+            out.append(it)
+        elif isinstance(it, RawFrame):
+            if it.kind != "raw":
+                raise DatasetError(f"sources[{k}]: expected a normalised raw frame, got kind {it.kind!r}")
+            out.append(Source(it.data, None, "raw", it.meta.cfa))
+        elif isinstance(it, (str, Path)):
+            p = Path(it)
+            if not p.exists():
+                raise DatasetError(f"{p}: no such clean source file")
+            out.append(Source(None, p, "raw", cfa))
+        else:
+            a = np.asarray(it, dtype=np.float32)
+            kind = "srgb" if a.ndim == 3 and a.shape[2] == 3 else "raw"
+            if kind == "raw" and a.ndim != 2:
+                raise DatasetError(f"sources[{k}]: expected an H x W mosaic or H x W x 3 image, got shape {a.shape}")
+            out.append(Source(a, None, kind, cfa if kind == "raw" else None))
+    if not out:
+        raise DatasetError("sources: expected at least one clean source")
+    return out
+
+
+# ------------------------------------------------------------------------------- sample maker
+class PatchMaker:
+    """Deterministic sample factory shared by the map-style and iterable datasets."""
+
+    def __init__(self, sources, noise: NoiseSampler, *, patch_size: int = 128, seed: int = 0,
+                 cfa_out: str | None = "RGGB", unprocess: Unprocess | None = None, cfa: str = "RGGB"):
+        self.sources = as_sources(sources, cfa)
+        self.noise = noise
+        self.patch_size = int(patch_size)
+        self.seed = int(seed)
+        self.cfa_out = check_pattern(cfa_out) if cfa_out else None
+        self.unprocess = unprocess
+        self._cache: dict[int, Source] = {}
+        if any(s.kind == "srgb" and s.data is not None for s in self.sources) and unprocess is None:
+            self.unprocess = Unprocess(cfa=self.cfa_out or "RGGB")
+
+    @property
+    def needs_spawn(self) -> bool:
+        return bool(getattr(self.noise, "needs_spawn", False) or any(s.needs_spawn for s in self.sources))
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state["_cache"] = {}  # never ship loaded images to workers
+        return state
+
+    def source(self, k: int) -> Source:
+        if k not in self._cache:
+            if len(self._cache) > 64:
+                self._cache.clear()
+            self._cache[k] = self.sources[k].load()
+        return self._cache[k]
+
+    def make(self, index: int, epoch: int, source_index: int | None = None) -> dict[str, Any]:
+        ss = np.random.SeedSequence([self.seed, int(epoch), int(index)])
+        crop_ss, noise_ss = ss.spawn(2)
+        rng = np.random.default_rng(crop_ss)
+        k = int(rng.integers(len(self.sources))) if source_index is None else int(source_index)
+        src = self.source(k)
+        p2 = 2 * self.patch_size
+        h, w = src.data.shape[:2]
+        where = src.path or f"sources[{k}]"
+        if src.kind == "raw":
+            cfa = src.cfa or "RGGB"
+            oy, ox = 0, 0
+            if self.cfa_out:
+                cands = [(a, b) for a in (0, 1) for b in (0, 1) if shift_pattern(cfa, a, b) == self.cfa_out]
+                if not cands:
+                    raise DatasetError(f"{where}: CFA {cfa} cannot be cropped to {self.cfa_out}")
+                oy, ox = cands[0]
+            if h - oy < p2 or w - ox < p2:
+                raise DatasetError(f"{where}: {h}x{w} mosaic is smaller than a {p2}x{p2} patch")
+            top = oy + 2 * int(rng.integers((h - oy - p2) // 2 + 1))
+            left = ox + 2 * int(rng.integers((w - ox - p2) // 2 + 1))
+            mosaic = src.data[top:top + p2, left:left + p2]
+            out_cfa = shift_pattern(cfa, top, left)
+            unproc: dict[str, float] = {}
+        else:
+            if h < p2 or w < p2:
+                raise DatasetError(f"{where}: {h}x{w} image is smaller than a {p2}x{p2} patch")
+            top, left = int(rng.integers(h - p2 + 1)), int(rng.integers(w - p2 + 1))
+            mosaic, drawn = self.unprocess(src.data[top:top + p2, left:left + p2], rng)
+            out_cfa = self.unprocess.cfa
+            unproc = {"red_gain": drawn["red_gain"], "blue_gain": drawn["blue_gain"], "rgb_gain": drawn["rgb_gain"]}
+        clean = np.ascontiguousarray(pack(np.asarray(mosaic, dtype=np.float32)))
+        noisy, params = self.noise(clean, np.random.default_rng(noise_ss), {"cfa": out_cfa})
+        meta = {"index": int(index), "epoch": int(epoch), "source": k, "top": top, "left": left,
+                "cfa": out_cfa, **{k2: float(v) for k2, v in params.items()}, **unproc}
+        return {"noisy": torch.from_numpy(np.ascontiguousarray(noisy, dtype=np.float32)),
+                "clean": torch.from_numpy(clean), "meta": meta}
+
+
+# ------------------------------------------------------------------------------- datasets
+class NoisyPatchDataset(torch.utils.data.Dataset):
+    """Map-style dataset of ``length`` noisy/clean packed patches per epoch.
+
+    Parameters
+    ----------
+    sources : sequence
+        Clean sources (paths, arrays, RawFrames; see :func:`as_sources`).
+    noise : callable
+        ``noise(clean_packed, rng, info) -> (noisy_packed, params)``
+        (see :mod:`simcam.dataset.noise_samplers`).
+    length : int
+        Samples per epoch.
+    patch_size : int
+        Packed patch side (the mosaic crop is twice as large).
+    seed, epoch : int
+        Sample i of epoch e uses ``SeedSequence([seed, e, i])``; call
+        :meth:`set_epoch` between epochs.
+    cfa_out : str or None
+        Crop phase so that packed channels follow this pattern (None: keep).
+    unprocess : Unprocess, optional
+        For sRGB sources (default: Brooks' parameters, identity colour matrix).
+    """
+
+    def __init__(self, sources, noise: NoiseSampler, *, length: int, patch_size: int = 128, seed: int = 0,
+                 epoch: int = 0, cfa_out: str | None = "RGGB", unprocess: Unprocess | None = None,
+                 cfa: str = "RGGB"):
+        self.maker = PatchMaker(sources, noise, patch_size=patch_size, seed=seed, cfa_out=cfa_out,
+                                unprocess=unprocess, cfa=cfa)
+        self.length = int(length)
+        self.epoch = int(epoch)
+
+    @property
+    def needs_spawn(self) -> bool:
+        return self.maker.needs_spawn
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = int(epoch)
+
+    def __len__(self) -> int:
+        return self.length
+
+    def __getitem__(self, index: int) -> dict[str, Any]:
+        if not 0 <= index < self.length:
+            raise IndexError(index)
+        return self.maker.make(index, self.epoch)
+
+
+class NoisyPatchStream(torch.utils.data.IterableDataset):
+    """Iterable dataset over a file list: ``patches_per_file`` patches from each file, files
+    in a per-epoch random order (``SeedSequence([seed, e])``).
+
+    Sharding across workers is by whole batches of ``batch_size`` samples
+    (batch b goes to worker b mod num_workers), so a ``DataLoader`` with the
+    same ``batch_size`` yields exactly the batches of ``num_workers=0``, in
+    the same order, with no duplicates.
+    """
+
+    def __init__(self, files: Sequence[Any], noise: NoiseSampler, *, patches_per_file: int = 8,
+                 batch_size: int = 1, patch_size: int = 128, seed: int = 0, epoch: int = 0,
+                 cfa_out: str | None = "RGGB", unprocess: Unprocess | None = None, cfa: str = "RGGB"):
+        self.maker = PatchMaker(files, noise, patch_size=patch_size, seed=seed, cfa_out=cfa_out,
+                                unprocess=unprocess, cfa=cfa)
+        self.patches_per_file = int(patches_per_file)
+        self.batch_size = int(batch_size)
+        self.epoch = int(epoch)
+
+    @property
+    def needs_spawn(self) -> bool:
+        return self.maker.needs_spawn
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = int(epoch)
+
+    def __len__(self) -> int:
+        return len(self.maker.sources) * self.patches_per_file
+
+    def file_order(self) -> np.ndarray:
+        rng = np.random.default_rng(np.random.SeedSequence([self.maker.seed, self.epoch]))
+        return rng.permutation(len(self.maker.sources))
+
+    def __iter__(self):
+        info = torch.utils.data.get_worker_info()
+        wid, nw = (info.id, info.num_workers) if info is not None else (0, 1)
+        order = self.file_order()
+        n = len(self)
+        n_batches = -(-n // self.batch_size)
+        for b in range(wid, n_batches, nw):
+            for i in range(b * self.batch_size, min(n, (b + 1) * self.batch_size)):
+                yield self.maker.make(i, self.epoch, source_index=int(order[i // self.patches_per_file]))
+
+
+# ------------------------------------------------------------------------------- loader
+def worker_init(worker_id: int) -> None:
+    """One intra-op thread per worker (torch, OpenMP users such as rawpy/onnxruntime)."""
+    os.environ["OMP_NUM_THREADS"] = "1"
+    torch.set_num_threads(1)
+
+
+def make_loader(dataset, *, batch_size: int, num_workers: int = 0, shuffle: bool = False,
+                generator_seed: int = 0, **kwargs):
+    """A ``DataLoader`` with the right start method (``spawn`` where rawpy/onnxruntime are used),
+    one thread per worker, and (for ``shuffle``) a seeded sampler."""
+    if isinstance(dataset, NoisyPatchStream) and batch_size != dataset.batch_size:
+        raise DatasetError(f"make_loader: batch_size {batch_size} differs from the stream's batch_size "
+                           f"{dataset.batch_size}; expected equal (worker sharding is by batch)")
+    if num_workers > 0:
+        kwargs.setdefault("worker_init_fn", worker_init)
+        if getattr(dataset, "needs_spawn", False):
+            kwargs.setdefault("multiprocessing_context", "spawn")
+    gen = None
+    if shuffle:
+        gen = torch.Generator()
+        gen.manual_seed(int(generator_seed) + int(getattr(dataset, "epoch", 0)))
+    return torch.utils.data.DataLoader(dataset, batch_size=batch_size, num_workers=num_workers,
+                                       shuffle=shuffle, generator=gen, **kwargs)
