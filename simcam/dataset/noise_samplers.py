@@ -19,17 +19,34 @@ from ..cfa import pack, unpack
 from ..errors import NoiseModelError
 
 
+def standard_normal(rng: np.random.Generator, shape: tuple[int, ...], backend: str = "auto") -> np.ndarray:
+    """float32 standard normals drawn from ``rng`` (numpy) or from a torch generator seeded by ``rng``."""
+    if backend not in ("auto", "numpy", "torch"):
+        raise NoiseModelError(f"normals: expected 'auto', 'numpy' or 'torch', got {backend!r}")
+    if backend != "numpy":
+        try:
+            import torch
+        except ImportError:
+            if backend == "torch":
+                raise NoiseModelError("normals='torch' needs torch: pip install simcam[torch]") from None
+        else:
+            g = torch.Generator().manual_seed(int(rng.integers(2**63)))
+            return torch.randn(shape, generator=g).numpy()
+    return rng.standard_normal(shape, dtype=np.float32)
+
+
 @dataclass
 class GaussianNoise:
     """Homoscedastic Gaussian noise, sigma ~ U(lo, hi) per sample (normalised raw units)."""
 
     sigma: tuple[float, float] = (0.24 / 255, 11.51 / 255)  # seed section 6.5's range, 8-bit units / 255
     clip: bool = False
+    normals: str = "auto"
     needs_spawn: bool = False
 
     def __call__(self, clean: np.ndarray, rng: np.random.Generator, info: dict | None = None):
         s = float(rng.uniform(*self.sigma))
-        noisy = clean + np.float32(s) * rng.standard_normal(clean.shape, dtype=np.float32)
+        noisy = clean + np.float32(s) * standard_normal(rng, clean.shape, self.normals)
         if self.clip:
             np.clip(noisy, 0.0, 1.0, out=noisy)
         return noisy, {"beta1": 0.0, "beta2": s * s}
@@ -48,12 +65,18 @@ class NLFNoise:
         log-uniformly in its range.
     clip : bool
         Clip the noisy patch to [0, 1].
+    normals : {"auto", "numpy", "torch"}
+        Source of the standard normals: numpy's generator, or a torch CPU
+        generator seeded from it (about 2.5x faster; "auto" uses torch when
+        installed). Both are deterministic given the sample's generator but
+        give different bytes.
     """
 
     nlfs: Sequence[tuple[float, float]] | None = None
     beta1: tuple[float, float] | None = None
     beta2: tuple[float, float] | None = None
     clip: bool = True
+    normals: str = "auto"
     needs_spawn: bool = False
 
     def __post_init__(self):
@@ -72,7 +95,7 @@ class NLFNoise:
     def __call__(self, clean: np.ndarray, rng: np.random.Generator, info: dict | None = None):
         b1, b2 = self.draw(rng)
         std = np.sqrt(np.maximum(np.float32(b1) * clean + np.float32(b2), 0.0, dtype=np.float32))
-        noisy = rng.standard_normal(clean.shape, dtype=np.float32)
+        noisy = standard_normal(rng, clean.shape, self.normals)
         noisy *= std
         noisy += clean
         if self.clip:
