@@ -140,3 +140,31 @@ def test_meta_only_equals_full_read_and_file_untouched():
     before = file_sha256(path)
     assert read_dng_meta(path).differences(read_dng(path).meta) == []
     assert file_sha256(path) == before
+
+
+def test_cfa_plane_color_is_respected(tmp_path):
+    """CFAPattern indexes CFAPlaneColor: planes (B, G, R) turn a written RGGB into BGGR (LibRaw agrees)."""
+    from simcam.io.synthetic import make_test_dng
+
+    path = make_test_dng(tmp_path / "a.dng", 32, 32, "RGGB")
+    raw = bytearray(path.read_bytes())
+    with tifffile.TiffFile(str(path)) as tif:
+        off = tif.pages[0].tags[50710].valueoffset
+    raw[off:off + 3] = bytes([2, 1, 0])
+    patched = tmp_path / "b.dng"
+    patched.write_bytes(bytes(raw))
+    assert read_dng_meta(patched).cfa == "BGGR"
+    assert _rawpy_reference(patched)["cfa"] == "BGGR"
+
+
+def test_iso_in_ifd0_with_several_values(tmp_path):
+    from simcam.io.synthetic import synthetic_meta
+
+    path = tmp_path / "iso.dng"
+    tifffile.imwrite(path, np.zeros((24, 24), np.uint16), photometric=32803, extratags=[
+        (50706, 1, 4, b"\x01\x04\x00\x00", True), (33421, 3, 2, (2, 2), True), (33422, 1, 4, b"\x01\x00\x02\x01", True),
+        (34855, 3, 2, (400, 400), True), (33434, 5, 1, (1, 50), True)])
+    meta = read_dng_meta(path)
+    assert meta.iso == 400.0 and meta.exposure_time_s == 0.02 and meta.cfa == "GRBG"
+    assert meta.white_level == 65535.0 and meta.active_area is None
+    assert synthetic_meta("GRBG").cfa == meta.cfa

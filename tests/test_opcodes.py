@@ -120,3 +120,12 @@ def test_trailing_bytes_and_bad_gain_map_size_raise():
     payload = _synthetic_list()[0].payload
     with pytest.raises(DngError, match="needs"):
         decode_gain_map(payload[:-4])
+
+
+def test_info_summarises_gain_maps(capsys):
+    from simcam.cli import main
+
+    assert main(["info", str(shared_path("dng/gopro_hero7_iso252.dng"))]) == 0
+    out = capsys.readouterr().out
+    assert "opcode_list2: 4 opcode(s)" in out
+    assert out.count("GainMap (id 9") == 4 and "points [23, 22, 1]" in out

@@ -252,16 +252,22 @@ def _first_number(v: Any) -> float | None:
         return None
 
 
+def _first_value(v: Any) -> float | None:
+    """First element of a SHORT/LONG tag value (ISOSpeedRatings may hold several)."""
+    v = np.atleast_1d(np.asarray(v, dtype=np.float64)) if v is not None else np.zeros(0)
+    return float(v[0]) if v.size else None
+
+
 def _iso_and_exposure(tags: _Tags) -> tuple[float | None, float | None, dict]:
     extra = {}
     iso = None
     t = tags.tag("ISOSpeedRatings")
     if t is not None:
-        iso = _first_number(t.value)
+        iso = _first_value(t.value)
     else:
         for key in ("ISOSpeedRatings", "PhotographicSensitivity"):
             if key in tags.exif:
-                iso = _first_number(tags.exif[key])
+                iso = _first_value(tags.exif[key])
                 break
     exp = tags.scalar("ExposureTime")
     if exp is None and "ExposureTime" in tags.exif:

@@ -133,8 +133,9 @@ class _IFDBuilder:
 def _dn_samples(frame: RawFrame, *, clip: bool, where: str) -> np.ndarray:
     from ..stages.raw import black_level_map
 
-    data = np.asarray(frame.data, dtype=np.float64)
     meta = frame.meta
+    # float32 is exact for integers below 2^24, so DN data needs no float64 copy
+    data = np.asarray(frame.data, dtype=np.float64 if frame.kind == "raw" else np.float32)
     if frame.kind == "raw":
         if meta.linearization_table is not None:
             raise DngError(f"{where}: cannot de-normalise a 'raw' frame through a LinearizationTable; "
@@ -145,12 +146,12 @@ def _dn_samples(frame: RawFrame, *, clip: bool, where: str) -> np.ndarray:
         raise DngError(f"{where}: frame kind {frame.kind!r}; expected 'raw_dn' or 'raw' (a CFA mosaic)")
     if not np.all(np.isfinite(data)):
         raise DngError(f"{where}: pixel data contains NaN or infinite values")
-    dn = np.round(data)
+    dn = np.rint(data)
     lo, hi = float(dn.min()), float(dn.max())
     if lo < 0 or hi > 65535:
         if not clip:
             raise DngError(f"{where}: pixel values {lo}..{hi} DN outside the uint16 range 0..65535 (clip=False)")
-        dn = np.clip(dn, 0, 65535)
+        np.clip(dn, 0, 65535, out=dn)
     return dn.astype("<u2")
 
 
