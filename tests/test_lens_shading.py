@@ -139,3 +139,11 @@ def test_stage_contract():
     with pytest.raises(Exception):
         LensShading(strength=1.5)
     assert LensShading(strength=0.5).to_node() == {"type": "lens_shading", "strength": 0.5}
+
+
+def test_cropped_frame_without_geometry_raises():
+    from simcam.errors import MetadataError
+
+    meta = synthetic_meta("RGGB", opcode_list2=radial_gain_maps(16, 16)).replace(origin=(2, 2))
+    with pytest.raises(MetadataError, match="active_area"):
+        LensShading()(RawFrame(np.ones((8, 8)), meta, kind="raw"))

@@ -497,9 +497,10 @@ def read_dng(path: str | os.PathLike) -> RawFrame:
         with rawpy.imread(str(path)) as raw:
             data = np.array(raw.raw_image, dtype=np.float32, copy=True)  # copy inside the with block
     except rawpy.LibRawFileUnsupportedError:
-        # LibRaw refuses images under 22 px a side; tiny uncompressed files (test
-        # fixtures) are read directly with tifffile instead.
-        if min(h, w) < 22 and meta.extra["compression"] == 1:
+        # LibRaw refuses images whose active area is under 22 px a side; tiny
+        # uncompressed files (test fixtures) are read directly with tifffile.
+        t, l, b, r = meta.active_area or (0, 0, h, w)
+        if min(b - t, r - l) < 22 and meta.extra["compression"] == 1:
             return RawFrame(data=_read_uncompressed(path), meta=meta, kind="raw_dn",
                             history=[f"read_dng({path.name})"])
         raise DngError(f"{path}: pixel data: LibRaw does not support this file") from None
