@@ -283,19 +283,9 @@ def load_metadata_dir(folder: str | Path, n_images: int) -> list[CameraMeta]:
 
 def _read_meta(path: Path) -> CameraMeta:
     if path.suffix.lower() == ".dng":
-        try:
-            from ..io.dng import read_dng_meta as reader  # type: ignore[attr-defined]
-        except ImportError:
-            from ..io.dng import read_dng  # type: ignore[attr-defined]
+        from ..io.dng import read_dng_meta
 
-            return read_dng(path).meta
-        return reader(path)
-    try:
-        from ..io import sidd  # type: ignore[attr-defined]
-    except ImportError:
-        raise DatasetError(f"{path}: reading SIDD metadata needs simcam.io.sidd, which this installation lacks") from None
-    for fn in ("read_sidd_metadata", "read_metadata", "load_metadata"):
-        if hasattr(sidd, fn):
-            out = getattr(sidd, fn)(path)
-            return out.meta if hasattr(out, "meta") and not isinstance(out, CameraMeta) else out
-    raise DatasetError(f"{path}: simcam.io.sidd has no metadata reader")
+        return read_dng_meta(path)
+    from ..io.sidd import read_sidd_meta
+
+    return read_sidd_meta(path)

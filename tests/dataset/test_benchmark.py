@@ -133,3 +133,18 @@ def test_leaderboard_refuses_foreign_file(tmp_path):
     p.write_text("# my notes\n")
     with pytest.raises(DatasetError, match="refusing to overwrite"):
         update_leaderboard(p, {"denoiser": "x", "raw": None, "srgb": None, "seconds_per_mp": 1.0})
+
+
+def test_metadata_folder_with_real_sidd_file(tmp_path, shared_file):
+    import os
+
+    from simcam.dataset.benchmark import load_metadata_dir, nlf_from_meta
+
+    src = shared_file("sidd/0001_METADATA_RAW_010.MAT")
+    os.symlink(src, tmp_path / "0001_METADATA_RAW_010.MAT")  # a link, not a copy
+    (metas,) = [load_metadata_dir(tmp_path, 1)]
+    assert metas[0].cfa == "GRBG" and metas[0].iso == 100.0
+    b1, b2 = nlf_from_meta(metas[0])
+    assert b1 == pytest.approx(4.7946e-4, rel=1e-3) and b2 == 0.0
+    with pytest.raises(DatasetError, match="expected one per image"):
+        load_metadata_dir(tmp_path, 2)
