@@ -105,6 +105,23 @@ def as_sources(items: Sequence[Any], cfa: str = "RGGB") -> list[Source]:
 
 
 # ------------------------------------------------------------------------------- sample maker
+def crop_origin(rng: np.random.Generator, shape: tuple[int, int], p2: int, cfa: str, cfa_out: str | None,
+                where: Any = "source") -> tuple[int, int]:
+    """Random (top, left) of a ``p2`` x ``p2`` mosaic crop whose pattern becomes ``cfa_out``."""
+    h, w = shape
+    oy, ox = 0, 0
+    if cfa_out:
+        cands = [(a, b) for a in (0, 1) for b in (0, 1) if shift_pattern(cfa, a, b) == cfa_out]
+        if not cands:
+            raise DatasetError(f"{where}: CFA {cfa} cannot be cropped to {cfa_out}")
+        oy, ox = cands[0]
+    if h - oy < p2 or w - ox < p2:
+        raise DatasetError(f"{where}: {h}x{w} mosaic is smaller than a {p2}x{p2} patch")
+    top = oy + 2 * int(rng.integers((h - oy - p2) // 2 + 1))
+    left = ox + 2 * int(rng.integers((w - ox - p2) // 2 + 1))
+    return top, left
+
+
 class PatchMaker:
     """Deterministic sample factory shared by the map-style and iterable datasets."""
 
@@ -147,16 +164,7 @@ class PatchMaker:
         where = src.path or f"sources[{k}]"
         if src.kind == "raw":
             cfa = src.cfa or "RGGB"
-            oy, ox = 0, 0
-            if self.cfa_out:
-                cands = [(a, b) for a in (0, 1) for b in (0, 1) if shift_pattern(cfa, a, b) == self.cfa_out]
-                if not cands:
-                    raise DatasetError(f"{where}: CFA {cfa} cannot be cropped to {self.cfa_out}")
-                oy, ox = cands[0]
-            if h - oy < p2 or w - ox < p2:
-                raise DatasetError(f"{where}: {h}x{w} mosaic is smaller than a {p2}x{p2} patch")
-            top = oy + 2 * int(rng.integers((h - oy - p2) // 2 + 1))
-            left = ox + 2 * int(rng.integers((w - ox - p2) // 2 + 1))
+            top, left = crop_origin(rng, (h, w), p2, cfa, self.cfa_out, where)
             mosaic = src.data[top:top + p2, left:left + p2]
             out_cfa = shift_pattern(cfa, top, left)
             unproc: dict[str, float] = {}
@@ -221,6 +229,50 @@ class NoisyPatchDataset(torch.utils.data.Dataset):
         if not 0 <= index < self.length:
             raise IndexError(index)
         return self.maker.make(index, self.epoch)
+
+
+class PairPatchDataset(torch.utils.data.Dataset):
+    """Map-style dataset of aligned crops of real noisy/clean pairs (no synthetic noise).
+
+    ``pairs`` is a list of ``(noisy, clean)`` normalised-raw mosaics; ``noisy``
+    may hold several frames of the same scene (F x H x W), one is picked per
+    sample. Seeding as in :class:`NoisyPatchDataset`.
+    """
+
+    def __init__(self, pairs: Sequence[tuple[np.ndarray, np.ndarray]], *, length: int, patch_size: int = 128,
+                 seed: int = 0, epoch: int = 0, cfa: str = "RGGB", cfa_out: str | None = "RGGB"):
+        self.pairs = []
+        for k, (n, c) in enumerate(pairs):
+            n, c = np.asarray(n, np.float32), np.asarray(c, np.float32)
+            n = n[None] if n.ndim == 2 else n
+            if n.ndim != 3 or n.shape[1:] != c.shape:
+                raise DatasetError(f"pairs[{k}]: noisy {n.shape} does not match clean {c.shape}; expected "
+                                   f"[F,] H x W frames of the clean H x W mosaic")
+            self.pairs.append((n, c))
+        self.length, self.patch_size, self.seed, self.epoch = int(length), int(patch_size), int(seed), int(epoch)
+        self.cfa, self.cfa_out = check_pattern(cfa), (check_pattern(cfa_out) if cfa_out else None)
+        self.needs_spawn = False
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = int(epoch)
+
+    def __len__(self) -> int:
+        return self.length
+
+    def __getitem__(self, index: int) -> dict[str, Any]:
+        if not 0 <= index < self.length:
+            raise IndexError(index)
+        rng = np.random.default_rng(np.random.SeedSequence([self.seed, self.epoch, int(index)]))
+        k = int(rng.integers(len(self.pairs)))
+        noisy, clean = self.pairs[k]
+        f = int(rng.integers(noisy.shape[0]))
+        p2 = 2 * self.patch_size
+        top, left = crop_origin(rng, clean.shape, p2, self.cfa, self.cfa_out, f"pairs[{k}]")
+        sl = (slice(top, top + p2), slice(left, left + p2))
+        meta = {"index": int(index), "epoch": self.epoch, "source": k, "frame": f, "top": top, "left": left,
+                "cfa": shift_pattern(self.cfa, top, left)}
+        return {"noisy": torch.from_numpy(np.ascontiguousarray(pack(noisy[f][sl]))),
+                "clean": torch.from_numpy(np.ascontiguousarray(pack(clean[sl]))), "meta": meta}
 
 
 class NoisyPatchStream(torch.utils.data.IterableDataset):

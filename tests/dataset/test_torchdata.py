@@ -127,3 +127,16 @@ def test_spawn_workers_with_npy_files(tmp_path):
     b0 = _batches(make_loader(ds, batch_size=4, num_workers=0))
     b2 = _batches(make_loader(ds, batch_size=4, num_workers=2, multiprocessing_context="spawn"))
     assert all(torch.equal(x[0], y[0]) for x, y in zip(b0, b2))
+
+
+def test_pair_dataset_aligned_crops():
+    from simcam.dataset.torchdata import PairPatchDataset
+
+    rng = np.random.default_rng(0)
+    clean = rng.random((40, 40)).astype(np.float32)
+    frames = clean[None] + np.arange(3, dtype=np.float32)[:, None, None]  # frame f = clean + f
+    ds = PairPatchDataset([(frames, clean)], length=6, patch_size=4, seed=1)
+    for i in range(6):
+        s = ds[i]
+        np.testing.assert_allclose((s["noisy"] - s["clean"]).numpy(), s["meta"]["frame"])
+    assert torch.equal(ds[2]["clean"], PairPatchDataset([(frames, clean)], length=6, patch_size=4, seed=1)[2]["clean"])
