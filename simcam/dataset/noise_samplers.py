@@ -142,3 +142,43 @@ class PipelineNoise:
         frame = RawFrame(unpack(clean), meta, kind="raw")
         out = self.pipeline(frame, seed=int(rng.integers(2**62)), epoch=0, index=0)
         return pack(out.data), {}
+
+
+@dataclass
+class OnnxFlowNoise:
+    """Noise Flow noise from an exported ONNX graph (``simcam flow export``), run with onnxruntime.
+
+    The session is created lazily in each worker process with one intra-op
+    thread (onnxruntime keeps its own thread pool: use ``spawn`` workers,
+    which :func:`simcam.dataset.torchdata.make_loader` picks from
+    ``needs_spawn``). ``conds`` are (iso, camera) pairs picked uniformly.
+    """
+
+    path: str
+    conds: Sequence[tuple[float, Any]] = ((800.0, 0),)
+    clip: bool = False
+    temperature: float | None = None
+    needs_spawn: bool = True
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state.pop("_flow", None)
+        return state
+
+    def _model(self):
+        if getattr(self, "_flow", None) is None:
+            from ..noise.onnx_sampler import OnnxNoiseFlow  # type: ignore[import-not-found]
+
+            self._flow = OnnxNoiseFlow(self.path, threads=1)
+        return self._flow
+
+    def __call__(self, clean: np.ndarray, rng: np.random.Generator, info: dict | None = None):
+        iso, cam = self.conds[int(rng.integers(len(self.conds)))]
+        noise = self._model().sample(clean[None], iso=iso, camera=cam, rng=rng, temperature=self.temperature)[0]
+        noisy = (clean + noise).astype(np.float32)
+        if self.clip:
+            np.clip(noisy, 0.0, 1.0, out=noisy)
+        params = {"iso": float(iso)}
+        if isinstance(cam, (int, np.integer)):
+            params["camera"] = float(cam)
+        return noisy, params
