@@ -134,8 +134,8 @@ def main() -> None:
     sensor = HiddenEffectSensor(spec)
     t0 = time.perf_counter()
     train = [capture(sensor, spec, s, 4, 32, rng) for s in scenes(TRAIN_DNGS, args.train_scenes, rng)]
-    test = [capture(sensor, spec, s, 2, 32, rng) for s in scenes(TEST_DNGS, args.test_scenes, rng)]
-    log(f"captures: {len(train)} train scenes x 4 frames, {len(test)} test scenes x 2 frames "
+    test = [capture(sensor, spec, s, 1, 32, rng) for s in scenes(TEST_DNGS, args.test_scenes, rng)]
+    log(f"captures: {len(train)} train scenes x 4 frames, {len(test)} test scenes x 1 frame "
         f"({time.perf_counter() - t0:.1f} s)")
 
     # noise levels estimated on the real training frames (seed 5.2.2 / 6.5)

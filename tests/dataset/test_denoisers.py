@@ -68,9 +68,9 @@ def test_dncnn_checkpoint_round_trip_and_training(tmp_path):
     torch = pytest.importorskip("torch")
     from simcam.dataset.dncnn import build_dncnn, load_checkpoint, save_checkpoint, train_dncnn
     torch.manual_seed(0)
-    model = build_dncnn(depth=4, width=8)
+    model = build_dncnn(depth=3, width=8)
     rng = np.random.default_rng(0)
-    clean = torch.from_numpy(rng.random((4, 4, 16, 16), dtype=np.float32) * 0.2 + 0.4)
+    clean = torch.from_numpy(rng.random((2, 4, 8, 8), dtype=np.float32) * 0.2 + 0.4)
     batches = [{"clean": clean, "noisy": clean + 0.05 * torch.randn(clean.shape)} for _ in range(4)]
     losses = train_dncnn(model, batches, steps=20, lr=3e-3, log=None)
     assert np.mean(losses[-5:]) < 0.5 * np.mean(losses[:5])
