@@ -73,7 +73,7 @@ def test_callable_denoiser_srgb_renderer_and_srgb_track():
 class _GreyDisplay(Stage):
     """Test-only stage: mosaic -> grey display RGB."""
 
-    type = "test_bench_grey"
+    type = "_test_bench_grey"
     accepts = frozenset({"raw"})
     produces = "display"
 
@@ -87,7 +87,7 @@ class _GreyDisplay(Stage):
 def test_pipeline_renderer_and_errors():
     from simcam.pipeline import Pipeline
 
-    pipe = Pipeline.from_dict({"version": 1, "input": "raw", "stages": [{"type": "test_bench_grey", "gain": 2.0}]})
+    pipe = Pipeline.from_dict({"version": 1, "input": "raw", "stages": [{"type": "_test_bench_grey", "gain": 2.0}]})
     render = pipeline_renderer(pipe)
     x = np.full((4, 4), 0.3, np.float32)
     np.testing.assert_allclose(render(x, CameraMeta()), 0.6, rtol=1e-6)
