@@ -24,8 +24,14 @@ from ..errors import DatasetError, require_extra
 CKPT_FORMAT = "simcam-dncnn"
 
 
-def build_dncnn(channels: int = 4, depth: int = 17, width: int = 64, batch_norm: bool = True):
-    """The DnCNN network: conv+ReLU, (depth-2) x conv(+BN)+ReLU, conv; residual output."""
+def build_dncnn(channels: int = 4, depth: int = 17, width: int = 64, batch_norm: bool = True,
+                zero_init_last: bool = True):
+    """The DnCNN network: conv+ReLU, (depth-2) x conv(+BN)+ReLU, conv; residual output.
+
+    ``zero_init_last`` (simcam choice) starts the last convolution at zero, so an
+    untrained model is the identity and short CPU trainings start from the noisy
+    input's error instead of a random residual.
+    """
     torch = require_extra("torch", "torch")
     nn = torch.nn
 
@@ -39,6 +45,9 @@ def build_dncnn(channels: int = 4, depth: int = 17, width: int = 64, batch_norm:
                     layers += [nn.BatchNorm2d(width)]
                 layers += [nn.ReLU(inplace=True)]
             layers += [nn.Conv2d(width, channels, 3, padding=1)]
+            if zero_init_last:
+                nn.init.zeros_(layers[-1].weight)
+                nn.init.zeros_(layers[-1].bias)
             self.body = nn.Sequential(*layers)
             self.arch = dict(channels=channels, depth=depth, width=width, batch_norm=batch_norm)
 
