@@ -21,7 +21,7 @@ _LOG_SQRT_2PI = 0.5 * np.log(2.0 * np.pi)
 class GaussianFamily(NoiseModel):
     """Base of models whose noise is N(0, var(clean)) per pixel."""
 
-    def _var_map(self, clean: np.ndarray, row0: int) -> np.ndarray:
+    def _var_map(self, clean: np.ndarray, row0: int, dtype=np.float32) -> np.ndarray:
         raise NotImplementedError
 
     def _sample_block(self, clean, cond, rng, row0):
@@ -34,10 +34,10 @@ class GaussianFamily(NoiseModel):
 
     def variance(self, clean, cond: NoiseCondition) -> np.ndarray:
         clean = check_clean(clean)
-        return self._var_map(clean, 0).astype(np.float64)
+        return np.broadcast_to(self._var_map(clean.astype(np.float64), 0, np.float64), clean.shape).copy()
 
     def _sd64(self, clean: np.ndarray, cond: NoiseCondition) -> np.ndarray:
-        var = np.broadcast_to(self._var_map(clean, 0), clean.shape).astype(np.float64)
+        var = np.broadcast_to(self._var_map(clean.astype(np.float64), 0, np.float64), clean.shape)
         if (var <= 0).any():
             raise NoiseModelError(
                 f"{cond.source or 'clean'}: model {self.type!r}: log_prob needs a positive variance, got 0 at "
@@ -81,6 +81,6 @@ class Gaussian(GaussianFamily):
     def _chk(cls, v):
         return validate_site_param(v, "sigma")
 
-    def _var_map(self, clean, row0):
-        s = site_map(self.sigma, clean.shape, row0, name="sigma")
-        return np.broadcast_to(np.float32(s) ** 2 if np.ndim(s) == 0 else s * s, clean.shape).astype(np.float32)
+    def _var_map(self, clean, row0, dtype=np.float32):
+        s = site_map(self.sigma, clean.shape, row0, name="sigma", dtype=dtype)
+        return np.broadcast_to(s * s, clean.shape).astype(dtype)

@@ -138,8 +138,9 @@ class PoissonGaussian(NoiseModel):
     def _chk2(cls, v):
         return validate_site_param(v, "beta2")
 
-    def _maps(self, shape, row0):
-        return (site_map(self.beta1, shape, row0, name="beta1"), site_map(self.beta2, shape, row0, name="beta2"))
+    def _maps(self, shape, row0, dtype=np.float32):
+        return (site_map(self.beta1, shape, row0, name="beta1", dtype=dtype),
+                site_map(self.beta2, shape, row0, name="beta2", dtype=dtype))
 
     def _sample_block(self, clean, cond, rng, row0):
         b1, b2 = self._maps(clean.shape, row0)
@@ -147,11 +148,11 @@ class PoissonGaussian(NoiseModel):
 
     def variance(self, clean, cond):
         clean = check_clean(clean)
-        b1, b2 = self._maps(clean.shape, 0)
-        return np.broadcast_to(clean * b1 + b2, clean.shape).astype(np.float64)
+        b1, b2 = self._maps(clean.shape, 0, np.float64)
+        return np.broadcast_to(clean.astype(np.float64) * b1 + b2, clean.shape).astype(np.float64)
 
     def _flat(self, clean, cond):
-        b1, b2 = self._maps(clean.shape, 0)
+        b1, b2 = self._maps(clean.shape, 0, np.float64)
         b1 = np.broadcast_to(b1, clean.shape).astype(np.float64).ravel()
         b2 = np.broadcast_to(b2, clean.shape).astype(np.float64).ravel()
         if (b2 <= 0).any():
