@@ -32,6 +32,15 @@ from ..errors import NoiseModelError, SimcamError
 
 #: rows per independently seeded block (even, so the CFA phase is the same in every block).
 BLOCK_ROWS = 32
+#: target elements per kernel call inside a block: temporaries stay below glibc's
+#: mmap threshold (128 KiB), which avoids a page-fault storm on every allocation.
+SUB_ELEMENTS = 24000
+
+
+def sub_rows(width: int) -> int:
+    """Rows per kernel call inside a block (even; depends only on the width)."""
+    r = max(2, (SUB_ELEMENTS // max(int(width), 1)) // 2 * 2)
+    return min(r, BLOCK_ROWS)
 
 SiteParam = Union[float, list[float]]
 
@@ -107,9 +116,13 @@ class NoiseModel(BaseModel):
         if row0 % BLOCK_ROWS:
             raise NoiseModelError(f"sample_rows: row0 must be a multiple of {BLOCK_ROWS}, got {row0}")
         out = np.empty(clean_rows.shape, dtype=np.float32)
-        for r in range(0, clean_rows.shape[0], BLOCK_ROWS):
-            blk = clean_rows[r:r + BLOCK_ROWS]
-            out[r:r + BLOCK_ROWS] = self._sample_block(blk, cond, block_rng(key, (row0 + r) // BLOCK_ROWS), row0 + r)
+        h = clean_rows.shape[0]
+        sub = sub_rows(clean_rows.shape[1])
+        for r in range(0, h, BLOCK_ROWS):
+            rng = block_rng(key, (row0 + r) // BLOCK_ROWS)
+            for s in range(r, min(r + BLOCK_ROWS, h), sub):
+                e = min(s + sub, r + BLOCK_ROWS, h)
+                out[s:e] = self._sample_block(clean_rows[s:e], cond, rng, row0 + s)
         return out
 
     def _sample_block(self, clean: np.ndarray, cond: NoiseCondition, rng: np.random.Generator,

@@ -29,6 +29,9 @@ _TWO_PI32 = np.float32(2.0 * np.pi)
 #: float32 margin (nats) below which the PTRS acceptance test is redone in float64.
 _BAND = np.float32(2.0e-2)
 _PTRS_MIN = 10.0
+_UNROLL = 12
+#: proposals per rejected element in PTRS rounds after the first.
+_RETRY = 4
 
 
 def normal_f32(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -65,38 +68,50 @@ def poisson_f32(rng: np.random.Generator, lam: np.ndarray) -> np.ndarray:
         float32 integer-valued counts, same shape as ``lam``.
     """
     lam = np.ascontiguousarray(lam, dtype=np.float32)
-    flat = lam.ravel()
-    out = np.zeros(flat.size, dtype=np.float32)
-    big = flat >= _PTRS_MIN
-    if big.all():
-        out[:] = _ptrs(rng, flat)
+    flat = lam.reshape(-1)
+    small = np.flatnonzero(flat < _PTRS_MIN)
+    if small.size == flat.size:
+        out = np.zeros(flat.size, dtype=np.float32)
     else:
-        ib = np.flatnonzero(big)
-        if ib.size:
-            out[ib] = _ptrs(rng, flat[ib])
-        small = np.flatnonzero(~big & (flat > 0))
-        if small.size:
-            out[small] = _inversion(rng, flat[small].astype(np.float64))
+        # PTRS on every element (means below 10 clamped: cheaper than gathering
+        # the large ones), then the small ones are overwritten by inversion.
+        out = _ptrs(rng, np.maximum(flat, np.float32(_PTRS_MIN)) if small.size else flat)
+    if small.size:
+        ls = flat[small].astype(np.float64)
+        pos = ls > 0
+        ks = np.zeros(small.size, np.float32)
+        if pos.any():
+            ks[pos] = _inversion(rng, ls[pos])
+        out[small] = ks
     return out.reshape(lam.shape)
 
 
 def _inversion(rng: np.random.Generator, lam: np.ndarray) -> np.ndarray:
-    """Sequential-search inversion for small means (float64), exact."""
+    """Sequential-search inversion for small means (float64), exact.
+
+    The first ``_UNROLL`` CDF steps are evaluated for every element at once;
+    the few elements beyond continue in a loop.
+    """
     u = rng.random(lam.size)
-    k = np.zeros(lam.size, dtype=np.float64)
     p = np.exp(-lam)
     cdf = p.copy()
+    k = (u > cdf).astype(np.float64)
+    for j in range(1, _UNROLL):
+        p *= lam
+        p /= j
+        cdf += p
+        k += u > cdf
     idx = np.flatnonzero(u > cdf)
-    j = 0
+    j = _UNROLL - 1
     while idx.size:
         j += 1
         p_i = p[idx] * lam[idx] / j
         p[idx] = p_i
         cdf[idx] += p_i
-        k[idx] = j
         # cdf rounding can stall just below u for u within 1e-16 of 1: stop once
         # the term underflows (the remaining mass is below float64 resolution).
         keep = (u[idx] > cdf[idx]) & (p_i > 0.0)
+        k[idx[keep]] += 1
         idx = idx[keep]
     return k.astype(np.float32)
 
@@ -113,20 +128,23 @@ def _ptrs_consts(lam: np.ndarray):
 
 
 def _ptrs(rng: np.random.Generator, lam: np.ndarray) -> np.ndarray:
-    """Vectorised PTRS for lam >= 10 (float32 fast path, float64 decisions near the boundary)."""
-    out = np.empty(lam.size, dtype=np.float32)
-    pending = None  # None: every element (first round, no gathers)
-    while True:
-        lm = lam if pending is None else lam[pending]
-        k, accept = _ptrs_round(rng, lm)
-        if pending is None:
-            out[:] = k
-            pending = np.flatnonzero(~accept)
-        else:
-            out[pending[accept]] = k[accept]
-            pending = pending[~accept]
-        if pending.size == 0:
-            return out
+    """Vectorised PTRS for lam >= 10 (float32 fast path, float64 decisions near the boundary).
+
+    Round 1 makes one proposal per element. The rejected ones (about 10 %) get
+    ``_RETRY`` i.i.d. proposals each per further round and keep the first
+    accepted one, which is the sequential rejection loop unrolled (exact).
+    """
+    k, accept = _ptrs_round(rng, lam)
+    pending = np.flatnonzero(~accept)
+    while pending.size:
+        n = pending.size
+        kk, aa = _ptrs_round(rng, np.repeat(lam[pending], _RETRY))
+        aa = aa.reshape(n, _RETRY)
+        got = aa.any(axis=1)
+        first = aa.argmax(axis=1)
+        k[pending[got]] = kk.reshape(n, _RETRY)[got, first[got]]
+        pending = pending[~got]
+    return k
 
 
 def _ptrs_round(rng: np.random.Generator, lm: np.ndarray):
@@ -138,10 +156,10 @@ def _ptrs_round(rng: np.random.Generator, lm: np.ndarray):
     u -= f32(0.5)
     v = rng.random(m, dtype=np.float32)
     us = np.abs(u)
-    np.subtract(f32(0.5), us, out=us)
-    np.maximum(us, f32(1e-30), out=us)
+    np.subtract(f32(0.5), us, out=us)  # in (0, 0.5]; 0 only for u = -0.5 (then rejected below)
     k = a * f32(2.0)
-    k /= us
+    with np.errstate(divide="ignore", invalid="ignore"):
+        k /= us
     k += b
     k *= u
     k += lm
@@ -149,12 +167,9 @@ def _ptrs_round(rng: np.random.Generator, lm: np.ndarray):
     np.floor(k, out=k)
     accept = us >= f32(0.07)
     accept &= v <= vr
-    # PTRS rejects k < 0 and (us < 0.013 and v > us) outright; the rest of the
-    # non-squeezed draws take the exact test.
-    test = k >= 0
-    test &= ~accept
-    test &= ~((us < f32(0.013)) & (v > us))
-    idx = np.flatnonzero(test)
+    # Draws outside the squeeze take the exact test (PTRS rejects k < 0 and
+    # (us < 0.013 and v > us) outright, inside _ptrs_test).
+    idx = np.flatnonzero(~accept)
     if idx.size:
         accept[idx] = _ptrs_test(lm.take(idx), k.take(idx), us.take(idx), v.take(idx),
                                  b.take(idx), a.take(idx))
@@ -162,6 +177,11 @@ def _ptrs_round(rng: np.random.Generator, lm: np.ndarray):
 
 
 def _ptrs_test(lm, k, us, v, b, a) -> np.ndarray:
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        return _ptrs_test_impl(lm, k, us, v, b, a)
+
+
+def _ptrs_test_impl(lm, k, us, v, b, a) -> np.ndarray:
     """Exact PTRS acceptance ``log(v inv_alpha / (a/us^2 + b)) <= log p(k)`` (bool array).
 
     Evaluated in float32 with the Stirling form
@@ -196,9 +216,13 @@ def _ptrs_test(lm, k, us, v, b, a) -> np.ndarray:
     np.divide(f32(1.0 / 360.0), k3, out=k3)
     np.subtract(f32(1.0 / 12.0) / kk, k3, out=k3)
     lhs += k3
+    ok = k >= 0
+    ok &= ~((us < f32(0.013)) & (v > us))
     accept = lhs <= 0
+    accept &= ok
     unsure = np.abs(lhs) < _BAND
     unsure |= k < f32(8.0)
+    unsure &= ok
     idx = np.flatnonzero(unsure)
     if idx.size:
         l64 = lm[idx].astype(np.float64)
