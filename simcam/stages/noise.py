@@ -6,7 +6,8 @@ calibrated range) or inline (``model: {type: nlf, beta1: ..., beta2: ...}``).
 ``sensor_seed`` fixes the fixed-pattern effects of a composite model (the same
 sensor in every frame). ``sample(rng, frame)`` draws the noisy mosaic and
 returns it as ``{"noisy": array}``; ``apply`` writes it into the frame (and the
-model's NLF into ``meta.noise_profile`` when the model has one).
+model's NLF into ``meta.noise_profile`` as DNG NoiseProfile pairs, one or one
+per R, G, B plane, when the model has the form ``beta1 x + beta2``).
 """
 
 from __future__ import annotations
@@ -91,8 +92,10 @@ class Noise(Stage):
         noisy = np.asarray(drawn["noisy"], dtype=np.float32)
         if noisy.shape != frame.data.shape:
             raise StageError(f"stage 'noise': drawn noise has shape {noisy.shape}, the frame {frame.data.shape}")
+        from ..noise.importers import model_noise_profile
+
         meta = frame.meta
-        nlf = nlf_pairs(self.model)
+        nlf = model_noise_profile(self.model, meta.cfa)
         if nlf is not None:
             meta = meta.replace(noise_profile=nlf)
         return frame.evolve(noisy, meta=meta, step=self.type)

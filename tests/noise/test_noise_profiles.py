@@ -109,7 +109,7 @@ def test_noise_stage_profile_and_inline(tmp_path):
     b = pipe(_frame(), seed=3)
     c = pipe(_frame(), seed=4)
     assert a.data.tobytes() == b.data.tobytes() and not np.array_equal(a.data, c.data)
-    assert a.meta.noise_profile.shape == (4, 2)
+    assert a.meta.noise_profile.shape == (3, 2)  # R, G, B planes (DNG NoiseProfile)
     # inline model, sensor seed on a composite; round trip through YAML
     node = {"type": "noise", "model": {"type": "composite", "base": {"type": "nlf", "beta1": 1e-3, "beta2": 1e-5},
                                        "effects": [{"type": "dsnu", "sigma": 1e-3}]}, "sensor_seed": 5}
