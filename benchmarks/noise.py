@@ -38,7 +38,7 @@ def _time(fn):
     return time.process_time() - t
 
 
-def run(h: int, w: int, seed: int = 0) -> list[tuple[str, float, str]]:
+def run(h: int, w: int, seed: int = 0, with_torch: bool = True) -> list[tuple[str, float, str]]:
     rng = np.random.default_rng(seed)
     clean = rng.random((h, w), dtype=np.float32)
     cond = NoiseCondition(cfa="RGGB")
@@ -50,6 +50,8 @@ def run(h: int, w: int, seed: int = 0) -> list[tuple[str, float, str]]:
     t_nlf = _time(lambda: nlf.sample(clean, cond, rng))
     rows.append(("RNG floor: numpy standard_normal float32", mp / t_floor, "1.00x (baseline)"))
     try:
+        if not with_torch:
+            raise ImportError
         import torch
 
         g = torch.Generator().manual_seed(0)
@@ -73,7 +75,7 @@ def run(h: int, w: int, seed: int = 0) -> list[tuple[str, float, str]]:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="256 x 256 smoke run")
+    ap.add_argument("--quick", action="store_true", help="256 x 256 smoke run (no torch row)")
     ap.add_argument("--mp", type=float, default=12.0, help="megapixels (4:3), default 12")
     a = ap.parse_args(argv)
     if a.quick:
@@ -81,7 +83,7 @@ def main(argv=None) -> int:
     else:
         w = int(round(np.sqrt(a.mp * 1e6 * 4 / 3) / 2)) * 2
         h = int(round(a.mp * 1e6 / w / 2)) * 2
-    rows = run(h, w)
+    rows = run(h, w, with_torch=not a.quick)
     print(f"noise sampling, {h}x{w} ({h * w / 1e6:.1f} MP), one run each, CPU time, numpy {np.__version__}\n")
     print("| sampler | MP/s | ratio |")
     print("|---|---:|---|")
