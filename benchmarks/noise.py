@@ -8,8 +8,8 @@
   (Poisson part only). Target: >= 4x faster.
 
 Clean image: uniform random in [0, 1) (lambda spans 0 .. 1/beta1); beta from
-the SIDD Google Pixel profile (ISO 800 and ISO 100). One timed run per row
-after a small warm-up; single thread (numpy ufuncs and generators). Times are
+the SIDD Google Pixel profile (ISO 800 and ISO 100). Median of 3 timed calls
+per row after a small warm-up; single thread (numpy ufuncs and generators). Times are
 process CPU time (``time.process_time``), so other load on the machine skews
 them less than wall time would.
 
@@ -30,12 +30,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from simcam.noise import NoiseCondition, model_from_entry  # noqa: E402
 
 
-def _time(fn):
-    """CPU seconds of this process for one call (robust on a shared machine;
-    every sampler here runs on one thread except torch, see its row)."""
-    t = time.process_time()
-    fn()
-    return time.process_time() - t
+def _time(fn, repeats: int = 3):
+    """Median CPU seconds of this process over ``repeats`` calls (robust on a
+    shared machine; every sampler here runs on one thread except torch, see its row)."""
+    ts = []
+    for _ in range(repeats):
+        t = time.process_time()
+        fn()
+        ts.append(time.process_time() - t)
+    return float(np.median(ts))
 
 
 def run(h: int, w: int, seed: int = 0, with_torch: bool = True) -> list[tuple[str, float, str]]:
@@ -84,7 +87,7 @@ def main(argv=None) -> int:
         w = int(round(np.sqrt(a.mp * 1e6 * 4 / 3) / 2)) * 2
         h = int(round(a.mp * 1e6 / w / 2)) * 2
     rows = run(h, w, with_torch=not a.quick)
-    print(f"noise sampling, {h}x{w} ({h * w / 1e6:.1f} MP), one run each, CPU time, numpy {np.__version__}\n")
+    print(f"noise sampling, {h}x{w} ({h * w / 1e6:.1f} MP), median of 3, CPU time, numpy {np.__version__}\n")
     print("| sampler | MP/s | ratio |")
     print("|---|---:|---|")
     for name, mps, ratio in rows:

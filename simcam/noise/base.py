@@ -32,9 +32,9 @@ from ..errors import NoiseModelError, SimcamError
 
 #: rows per independently seeded block (even, so the CFA phase is the same in every block).
 BLOCK_ROWS = 32
-#: target elements per kernel call inside a block: temporaries stay below glibc's
-#: mmap threshold (128 KiB), which avoids a page-fault storm on every allocation.
-SUB_ELEMENTS = 24000
+#: target elements per kernel call inside a block (kernels reuse workspace
+#: buffers of this size, see kernels.py).
+SUB_ELEMENTS = 131072
 
 
 def sub_rows(width: int) -> int:
@@ -107,26 +107,31 @@ class NoiseModel(BaseModel):
         step = h if not chunk_rows else max(BLOCK_ROWS, -(-int(chunk_rows) // BLOCK_ROWS) * BLOCK_ROWS)
         out = np.empty(clean.shape, dtype=np.float32)
         for r0 in range(0, h, step):
-            out[r0:r0 + step] = self.sample_rows(clean[r0:r0 + step], cond, key, r0)
+            self.sample_rows(clean[r0:r0 + step], cond, key, r0, out=out[r0:r0 + step])
         return out
 
     def sample_rows(self, clean_rows: np.ndarray, cond: NoiseCondition, key: np.ndarray,
-                    row0: int) -> np.ndarray:
-        """Rows ``row0 ...`` of the frame sampled with frame key ``key`` (row0 % BLOCK_ROWS == 0)."""
+                    row0: int, *, out: np.ndarray | None = None) -> np.ndarray:
+        """Rows ``row0 ...`` of the frame sampled with frame key ``key`` (row0 % BLOCK_ROWS == 0).
+
+        ``out`` (float32, shape of ``clean_rows``) receives the result when given.
+        """
         if row0 % BLOCK_ROWS:
             raise NoiseModelError(f"sample_rows: row0 must be a multiple of {BLOCK_ROWS}, got {row0}")
-        out = np.empty(clean_rows.shape, dtype=np.float32)
+        if out is None:
+            out = np.empty(clean_rows.shape, dtype=np.float32)
         h = clean_rows.shape[0]
         sub = sub_rows(clean_rows.shape[1])
         for r in range(0, h, BLOCK_ROWS):
             rng = block_rng(key, (row0 + r) // BLOCK_ROWS)
             for s in range(r, min(r + BLOCK_ROWS, h), sub):
                 e = min(s + sub, r + BLOCK_ROWS, h)
-                out[s:e] = self._sample_block(clean_rows[s:e], cond, rng, row0 + s)
+                self._sample_block(clean_rows[s:e], cond, rng, row0 + s, out[s:e])
         return out
 
     def _sample_block(self, clean: np.ndarray, cond: NoiseCondition, rng: np.random.Generator,
-                      row0: int) -> np.ndarray:
+                      row0: int, out: np.ndarray) -> None:
+        """Fill ``out`` (float32, shape of ``clean``) with noisy values for these rows."""
         raise NotImplementedError
 
     def log_prob(self, noisy: np.ndarray, clean: np.ndarray, cond: NoiseCondition) -> np.ndarray:

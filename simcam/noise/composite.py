@@ -98,11 +98,15 @@ class Composite(NoiseModel):
 
         step = h if not chunk_rows else max(BLOCK_ROWS, -(-int(chunk_rows) // BLOCK_ROWS) * BLOCK_ROWS)
         for r0 in range(0, h, step):
-            x[r0:r0 + step] = self.base.sample_rows(signal[r0:r0 + step], cond, key, r0)
+            self.base.sample_rows(signal[r0:r0 + step], cond, key, r0, out=x[r0:r0 + step])
         for i, e in enumerate(self.effects):
             if e.stage == "readout":
                 x = e.apply(x, self._ctx(cond, key, i, fixed, frames, signal))
         return x
+
+    def sample_rows(self, clean_rows, cond, key, row0, *, out=None):
+        raise NoiseModelError("model 'composite': sample_rows is not available (effects such as spatial_correlation "
+                              "and row_noise act on the whole frame); call sample() (chunk_rows still applies to the base model)")
 
     def _ctx(self, cond, key, i, fixed, frames, signal):
         return EffectContext(cfa=cond.cfa, key=key, stream=1 + i, fixed=fixed[i], frame=frames[i] if frames else {},

@@ -24,13 +24,12 @@ class GaussianFamily(NoiseModel):
     def _var_map(self, clean: np.ndarray, row0: int, dtype=np.float32) -> np.ndarray:
         raise NotImplementedError
 
-    def _sample_block(self, clean, cond, rng, row0):
+    def _sample_block(self, clean, cond, rng, row0, out):
         sd = self._var_map(clean, row0)
         np.sqrt(sd, out=sd)
-        z = normal_f32(rng, clean.size).reshape(clean.shape)
-        z *= sd
-        z += clean
-        return z
+        normal_f32(rng, clean.size, out=out)
+        out *= sd
+        out += clean
 
     def variance(self, clean, cond: NoiseCondition) -> np.ndarray:
         clean = check_clean(clean)

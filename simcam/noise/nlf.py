@@ -9,6 +9,7 @@ from pydantic import field_validator
 
 from .base import SiteParam, register_model, site_map, validate_site_param
 from .gaussian import GaussianFamily
+from .kernels import _W
 
 
 @register_model
@@ -39,6 +40,7 @@ class NLF(GaussianFamily):
     def _var_map(self, clean, row0, dtype=np.float32):
         b1 = site_map(self.beta1, clean.shape, row0, name="beta1", dtype=dtype)
         b2 = site_map(self.beta2, clean.shape, row0, name="beta2", dtype=dtype)
-        var = clean * b1
+        var = _W.get("nlf_var", clean.size, dtype).reshape(clean.shape) if dtype == np.float32 else np.empty(clean.shape, dtype)
+        np.multiply(clean, b1, out=var)
         var += b2
         return var

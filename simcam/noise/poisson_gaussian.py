@@ -22,7 +22,7 @@ from scipy.special import gammaln, log_ndtr, logsumexp
 
 from ..errors import NoiseModelError
 from .base import NoiseCondition, NoiseModel, SiteParam, check_clean, check_same_shape, register_model, site_map, site_values, validate_site_param
-from .kernels import normal_f32, poisson_f32
+from .kernels import _W, normal_f32, poisson_f32
 
 #: largest Poisson mean sampled exactly in float32 (integer counts stay exact).
 LAMBDA_MAX = float(2**22)
@@ -37,17 +37,19 @@ def _check_lambda(lam_max: float, beta1_min: float, where: str) -> None:
             f"{LAMBDA_MAX:.3g} (use the nlf model for such signals)")
 
 
-def pg_sample(clean: np.ndarray, scale, beta2, rng: np.random.Generator, *, where: str = "clean") -> np.ndarray:
-    """``scale * Poisson(clean / scale) + sqrt(beta2) * z`` (float32 maps or scalars)."""
-    lam = clean / scale
+def pg_sample(clean: np.ndarray, scale, beta2, rng: np.random.Generator, out: np.ndarray, *,
+              where: str = "clean") -> np.ndarray:
+    """``out = scale * Poisson(clean / scale) + sqrt(beta2) * z`` (float32 maps or scalars)."""
+    lam = _W.get("pg_lam", clean.size).reshape(clean.shape)
+    np.divide(clean, scale, out=lam)
     if lam.size:
         _check_lambda(float(lam.max()), float(np.min(scale)), where)
-    k = poisson_f32(rng, lam)
-    k *= scale
-    z = normal_f32(rng, clean.size).reshape(clean.shape)
+    poisson_f32(rng, lam, out=out)
+    out *= scale
+    z = normal_f32(rng, clean.size, out=_W.get("pg_z", clean.size)).reshape(clean.shape)
     z *= np.sqrt(beta2)
-    k += z
-    return k
+    out += z
+    return out
 
 
 def pg_logpdf(x: np.ndarray, lam: np.ndarray, scale: np.ndarray, var: np.ndarray) -> np.ndarray:
@@ -142,9 +144,9 @@ class PoissonGaussian(NoiseModel):
         return (site_map(self.beta1, shape, row0, name="beta1", dtype=dtype),
                 site_map(self.beta2, shape, row0, name="beta2", dtype=dtype))
 
-    def _sample_block(self, clean, cond, rng, row0):
+    def _sample_block(self, clean, cond, rng, row0, out):
         b1, b2 = self._maps(clean.shape, row0)
-        return pg_sample(clean, b1, b2, rng, where=f"{cond.source or 'clean'}: poisson_gaussian")
+        pg_sample(clean, b1, b2, rng, out, where=f"{cond.source or 'clean'}: poisson_gaussian")
 
     def variance(self, clean, cond):
         clean = check_clean(clean)

@@ -60,12 +60,12 @@ class PoissonMixture(NoiseModel):
         return (site_map(self.beta1, shape, row0, name="beta1", dtype=dtype),
                 site_map(self.beta2, shape, row0, name="beta2", dtype=dtype))
 
-    def _sample_block(self, clean, cond, rng, row0):
+    def _sample_block(self, clean, cond, rng, row0, out):
         b1, b2 = self._maps(clean.shape, row0)
         pick1 = rng.random(clean.shape, dtype=np.float32) < np.float32(self.p1)
         z = np.where(pick1, np.float32(self.z1), np.float32(self.z2))
         scale = z * b1
-        return pg_sample(clean, scale, b2, rng, where=f"{cond.source or 'clean'}: poisson_mixture")
+        pg_sample(clean, scale, b2, rng, out, where=f"{cond.source or 'clean'}: poisson_mixture")
 
     def variance(self, clean, cond):
         clean = check_clean(clean)
