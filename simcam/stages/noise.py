@@ -50,7 +50,6 @@ class Noise(Stage):
     def __init__(self, params=None, **kw):
         super().__init__(params, **kw)
         self.model = self._build_model()
-        self._profile_cfa = None
 
     def _build_model(self):
         from ..noise.base import model_from_entry

@@ -213,3 +213,29 @@ def test_shape_mismatch_and_unknown_cfa():
 def test_bad_entries(entry, msg):
     with pytest.raises(NoiseModelError, match=msg):
         model_from_entry(entry)
+
+
+def test_clipped_per_intensity_mean_and_variance():
+    """Clipped NLF near the ends: sample moments vs the censored-normal moments (scipy quad).
+
+    E[clip(X)] and Var[clip(X)] with X ~ N(c, b1 c + b2) computed by
+    integrating clip(x) against scipy.stats.norm; 5-SE bands as above.
+    """
+    from scipy import integrate
+
+    b1, b2 = 2e-3, 1e-4
+    m = model_from_entry({"type": "clipped", "base": {"type": "nlf", "beta1": b1, "beta2": b2}})
+    levels = np.array([0.0, 0.01, 0.5, 0.98, 1.0], np.float32)
+    clean = np.repeat(levels, 64)[:, None] * np.ones((1, 256), np.float32)
+    noisy = m.sample(clean, COND, np.random.default_rng(21)).astype(np.float64)
+    for i, c in enumerate(levels.astype(np.float64)):
+        x = noisy[i * 64:(i + 1) * 64].ravel()
+        sd = np.sqrt(b1 * c + b2)
+        d = stats.norm(c, sd)
+        m1 = integrate.quad(lambda t: t * d.pdf(t), 0, 1)[0] + d.sf(1)
+        m2 = integrate.quad(lambda t: t * t * d.pdf(t), 0, 1)[0] + d.sf(1)
+        var = m2 - m1 * m1
+        n = x.size
+        assert abs(x.mean() - m1) < 5 * np.sqrt(var / n), c
+        m4 = np.mean((x - x.mean()) ** 4)
+        assert abs(x.var(ddof=1) - var) < 5 * np.sqrt(max(m4 - var * var, 0) / n) + 1e-12, c
