@@ -3,16 +3,19 @@
 ``import_darktable``
     darktable's ``noiseprofiles.json`` (GPL-3+ data: read as input only,
     never copied into simcam). Each profile holds Poisson-Gaussian (a, b) per
-    RGB channel, fitted by darktable's ``tools/noise`` profiling on the raw
-    image scaled to [0, 1] by its ``rawprepare`` module (black subtracted,
-    divided by white - black) *before* white balance: darktable's
-    ``denoiseprofile`` module multiplies a and b by the white-balance
-    coefficients (``processed_maximum``) at run time precisely because the
-    stored values refer to the un-balanced data. That scale is simcam's
-    normalised raw, so the conversion is the identity:
-    ``var = a * x + b``  ->  ``nlf: beta1 = a, beta2 = b`` per colour, mapped
-    to the CFA sites of the chosen pattern. Negative ``b`` (a few fits) is set
-    to 0 and listed in the provenance notes; repeated ISOs are averaged.
+    RGB channel, ``var = a * x + b``, fitted by darktable's ``tools/noise``
+    scripts on images exported with its "raw linear" style: ``rawprepare``
+    scales the raw to [0, 1] (black subtracted, divided by white - black),
+    white balance is pass-through (``temperature`` coefficients 1, 1, 1) and
+    the colour profile is linear camera RGB. darktable's ``denoiseprofile``
+    module multiplies a and b by the white-balance coefficients
+    (``processed_maximum``) at run time because the stored values refer to
+    un-balanced data. That scale is simcam's normalised raw, so the conversion
+    is the identity: ``nlf: beta1 = a, beta2 = b`` per colour, mapped to the
+    CFA sites of the chosen pattern. Caveat: darktable measures after
+    demosaicking, so for interpolated sites the per-site raw variance can be
+    somewhat larger than these values. Negative ``b`` (a few fits) is set to 0
+    and listed in the provenance notes; repeated ISOs are averaged.
 
 ``profile_from_dng``
     the DNG NoiseProfile tag (DNG 1.6 spec, tag 51041): (S, O) pairs of
@@ -107,8 +110,9 @@ def import_darktable(path: str | Path, camera: str, *, cfa: str = "RGGB", camera
         "schema_version": 1,
         "provenance": {
             "source": f"{path.name} (darktable noise profiles, version {doc.get('version')}), camera {mk.get('maker')} {mo.get('model')}",
-            "method": "darktable Poisson-Gaussian fit var = a x + b per RGB on raw scaled to [0, 1] before white balance "
-                      "(= simcam normalised raw): beta1 = a, beta2 = b",
+            "method": "darktable Poisson-Gaussian fit var = a x + b per RGB on raw scaled to [0, 1], white balance "
+                      "pass-through ('raw linear' style; = simcam normalised raw): beta1 = a, beta2 = b. darktable "
+                      "fits after demosaicking: per-site raw variance of interpolated sites may be higher",
             "tool": "simcam profile import-darktable",
             "created": _today(),
             "licence": "darktable data is GPL-3.0-or-later; this file is derived from it",
