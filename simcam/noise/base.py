@@ -94,11 +94,12 @@ class NoiseModel(BaseModel):
 
     # -- contract ---------------------------------------------------------
     def sample(self, clean: np.ndarray, cond: NoiseCondition, rng: np.random.Generator, *,
-               chunk_rows: int | None = None) -> np.ndarray:
+               chunk_rows: int | None = None, threads: int = 1) -> np.ndarray:
         """Noisy normalised raw for ``clean`` (float32 H x W), drawn from ``rng``.
 
-        ``chunk_rows`` only bounds the rows processed per call; the result is
-        byte-identical for every value (see module docstring).
+        ``chunk_rows`` only bounds the rows processed per call and ``threads``
+        samples row blocks in parallel; the result is byte-identical for every
+        value of either (see module docstring).
         """
         clean = check_clean(clean, where=f"{cond.source or 'clean'}")
         self.check_cond(cond, clean.shape)
@@ -107,14 +108,17 @@ class NoiseModel(BaseModel):
         step = h if not chunk_rows else max(BLOCK_ROWS, -(-int(chunk_rows) // BLOCK_ROWS) * BLOCK_ROWS)
         out = np.empty(clean.shape, dtype=np.float32)
         for r0 in range(0, h, step):
-            self.sample_rows(clean[r0:r0 + step], cond, key, r0, out=out[r0:r0 + step])
+            self.sample_rows(clean[r0:r0 + step], cond, key, r0, out=out[r0:r0 + step], threads=threads)
         return out
 
     def sample_rows(self, clean_rows: np.ndarray, cond: NoiseCondition, key: np.ndarray,
-                    row0: int, *, out: np.ndarray | None = None) -> np.ndarray:
+                    row0: int, *, out: np.ndarray | None = None, threads: int = 1) -> np.ndarray:
         """Rows ``row0 ...`` of the frame sampled with frame key ``key`` (row0 % BLOCK_ROWS == 0).
 
-        ``out`` (float32, shape of ``clean_rows``) receives the result when given.
+        ``out`` (float32, shape of ``clean_rows``) receives the result when
+        given; ``threads > 1`` processes row blocks on a thread pool (numpy
+        releases the GIL in its kernels; each block has its own generator and
+        rows, so the bytes do not depend on it).
         """
         if row0 % BLOCK_ROWS:
             raise NoiseModelError(f"sample_rows: row0 must be a multiple of {BLOCK_ROWS}, got {row0}")
@@ -122,11 +126,22 @@ class NoiseModel(BaseModel):
             out = np.empty(clean_rows.shape, dtype=np.float32)
         h = clean_rows.shape[0]
         sub = sub_rows(clean_rows.shape[1])
-        for r in range(0, h, BLOCK_ROWS):
+
+        def block(r: int) -> None:
             rng = block_rng(key, (row0 + r) // BLOCK_ROWS)
             for s in range(r, min(r + BLOCK_ROWS, h), sub):
                 e = min(s + sub, r + BLOCK_ROWS, h)
                 self._sample_block(clean_rows[s:e], cond, rng, row0 + s, out[s:e])
+
+        starts = range(0, h, BLOCK_ROWS)
+        if threads and threads > 1 and len(starts) > 1:
+            from concurrent.futures import ThreadPoolExecutor
+
+            with ThreadPoolExecutor(max_workers=int(threads)) as pool:
+                list(pool.map(block, starts))
+        else:
+            for r in starts:
+                block(r)
         return out
 
     def _sample_block(self, clean: np.ndarray, cond: NoiseCondition, rng: np.random.Generator,

@@ -47,8 +47,8 @@ class Clipped(NoiseModel):
     def check_cond(self, cond, shape):
         self.base.check_cond(cond, shape)
 
-    def sample_rows(self, clean_rows, cond, key, row0, *, out=None):
-        out = self.base.sample_rows(clean_rows, cond, key, row0, out=out)
+    def sample_rows(self, clean_rows, cond, key, row0, *, out=None, threads=1):
+        out = self.base.sample_rows(clean_rows, cond, key, row0, out=out, threads=threads)
         return np.clip(out, np.float32(self.low), np.float32(self.high), out=out)
 
     def variance(self, clean, cond):

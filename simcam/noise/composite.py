@@ -80,7 +80,8 @@ class Composite(NoiseModel):
         return out
 
     # -- sampling ----------------------------------------------------------------
-    def sample(self, clean, cond: NoiseCondition, rng: np.random.Generator, *, chunk_rows: int | None = None):
+    def sample(self, clean, cond: NoiseCondition, rng: np.random.Generator, *, chunk_rows: int | None = None,
+               threads: int = 1):
         clean = check_clean(clean, where=f"{cond.source or 'clean'}")
         self.check_cond(cond, clean.shape)
         key = frame_key(rng)
@@ -98,13 +99,13 @@ class Composite(NoiseModel):
 
         step = h if not chunk_rows else max(BLOCK_ROWS, -(-int(chunk_rows) // BLOCK_ROWS) * BLOCK_ROWS)
         for r0 in range(0, h, step):
-            self.base.sample_rows(signal[r0:r0 + step], cond, key, r0, out=x[r0:r0 + step])
+            self.base.sample_rows(signal[r0:r0 + step], cond, key, r0, out=x[r0:r0 + step], threads=threads)
         for i, e in enumerate(self.effects):
             if e.stage == "readout":
                 x = e.apply(x, self._ctx(cond, key, i, fixed, frames, signal))
         return x
 
-    def sample_rows(self, clean_rows, cond, key, row0, *, out=None):
+    def sample_rows(self, clean_rows, cond, key, row0, *, out=None, threads=1):
         raise NoiseModelError("model 'composite': sample_rows is not available (effects such as spatial_correlation "
                               "and row_noise act on the whole frame); call sample() (chunk_rows still applies to the base model)")
 

@@ -4,7 +4,8 @@
 [+ ``camera``], interpolated in log-ISO, ``extrapolate`` to allow leaving the
 calibrated range) or inline (``model: {type: nlf, beta1: ..., beta2: ...}``).
 ``sensor_seed`` fixes the fixed-pattern effects of a composite model (the same
-sensor in every frame). ``sample(rng, frame)`` draws the noisy mosaic and
+sensor in every frame); ``chunk_rows`` and ``threads`` change memory use and
+speed, never the bytes. ``sample(rng, frame)`` draws the noisy mosaic and
 returns it as ``{"noisy": array}``; ``apply`` writes it into the frame (and the
 model's NLF into ``meta.noise_profile`` as DNG NoiseProfile pairs, one or one
 per R, G, B plane, when the model has the form ``beta1 x + beta2``).
@@ -38,6 +39,7 @@ class Noise(Stage):
         model: Optional[dict[str, Any]] = None
         sensor_seed: Optional[int] = None
         chunk_rows: Optional[int] = None
+        threads: int = 1
 
         @model_validator(mode="after")
         def _one_source(self):
@@ -82,7 +84,8 @@ class Noise(Stage):
                               camera=self.params.camera, cfa=cfa, source=frame.meta.source)
 
     def sample(self, rng: np.random.Generator, frame: RawFrame) -> dict[str, Any]:
-        noisy = self.model.sample(frame.data, self.condition(frame), rng, chunk_rows=self.params.chunk_rows)
+        noisy = self.model.sample(frame.data, self.condition(frame), rng, chunk_rows=self.params.chunk_rows,
+                                  threads=self.params.threads)
         return {"noisy": noisy}
 
     def apply(self, frame: RawFrame, drawn: dict[str, Any] | None = None) -> RawFrame:

@@ -164,8 +164,8 @@ def test_same_seed_same_bytes_any_chunking(name):
     m = model_from_entry(ENTRIES[name])
     clean = np.random.default_rng(0).random((3 * BLOCK_ROWS + 6, 50), dtype=np.float32)
     a = m.sample(clean, COND, np.random.default_rng(42))
-    for chunk in (1, BLOCK_ROWS, 45, 1000):
-        b = m.sample(clean, COND, np.random.default_rng(42), chunk_rows=chunk)
+    for chunk, threads in ((1, 1), (BLOCK_ROWS, 1), (45, 3), (1000, 2)):
+        b = m.sample(clean, COND, np.random.default_rng(42), chunk_rows=chunk, threads=threads)
         assert a.tobytes() == b.tobytes()
     c = m.sample(clean, COND, np.random.default_rng(43))
     assert not np.array_equal(a, c)
