@@ -21,7 +21,7 @@ from pydantic import Field, field_validator
 
 from ..errors import NoiseModelError
 from .base import NoiseCondition, NoiseModel, check_clean, check_same_shape, frame_key, model_from_entry, register_model
-from .effects.base import Effect, EffectContext, effect_from_entry
+from .effects.base import EffectContext, effect_from_entry
 
 
 @register_model

@@ -4,12 +4,13 @@ Sampling is exact (:func:`kernels.poisson_f32`, no normal approximation).
 ``log_prob`` sums the Poisson-weighted Gaussian densities
 ``log sum_k Pois(k; lam) N(x; beta1 k, beta2)``, ``lam = clean / beta1``, over a
 window of k: the summand is log-concave in k (a product of two log-concave
-sequences), so it is unimodal; the window is centred on the mode of its
-Gaussian approximation, ``k* = (1 + lam_eff * x / beta1 * beta1^2 / beta2) / ...``
-(precision-weighted mean of lam and x / beta1), half-width
-``12 s + 12`` with ``s^-2 = 1 / max(lam, 1) + beta1^2 / beta2``. The terms
-outside are below exp(-60) of the largest term (documented truncation; the
-tests compare with a brute-force sum over all k).
+sequences), so it is unimodal. The window is centred on the mode of its
+Gaussian approximation, the precision-weighted mean
+``k* = (lam * P_p + (x / beta1) * P_g) / (P_p + P_g)`` with
+``P_p = 1 / max(lam, 1)`` and ``P_g = beta1^2 / beta2``, and has half-width
+``12 / sqrt(P_p + P_g) + 12``: terms outside lie more than 12 standard
+deviations of the summand from its mode (documented truncation; the tests
+compare with a brute-force sum over all k to 1e-9).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from pydantic import field_validator
 from scipy.special import gammaln, log_ndtr, logsumexp
 
 from ..errors import NoiseModelError
-from .base import NoiseCondition, NoiseModel, SiteParam, check_clean, check_same_shape, register_model, site_map, site_values, validate_site_param
+from .base import NoiseModel, SiteParam, check_clean, check_same_shape, register_model, site_map, site_values, validate_site_param
 from .kernels import _W, normal_f32, poisson_f32
 
 #: largest Poisson mean sampled exactly in float32 (integer counts stay exact).

@@ -2,12 +2,10 @@
 
 import csv
 import math
-import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 from simcam.errors import PipelineError, ProfileError, StageError
 from simcam.frame import CameraMeta, RawFrame
