@@ -105,11 +105,11 @@ class NLFNoise:
 
 @dataclass
 class ModelNoise:
-    """Any simcam noise model with ``sample(clean, cond, rng) -> noisy`` on a mosaic.
+    """Any simcam noise model (:mod:`simcam.noise`): ``model.sample(clean, cond, rng) -> noisy`` on a mosaic.
 
-    ``conds`` are the conditions to pick from uniformly (dicts with e.g. ``iso``,
-    ``camera``); the CFA of the patch is added as ``cond["cfa"]``. Numeric
-    condition values are reported in the sample's meta.
+    ``conds`` are the conditions to pick from uniformly (dicts of
+    :class:`~simcam.noise.base.NoiseCondition` fields, e.g. ``{"iso": 800}``);
+    the patch's CFA is filled in. Numeric condition values go into the sample's meta.
     """
 
     model: Any
@@ -117,11 +117,67 @@ class ModelNoise:
     needs_spawn: bool = False
 
     def __call__(self, clean: np.ndarray, rng: np.random.Generator, info: dict | None = None):
+        from ..noise.base import NoiseCondition
+
         cond = dict(self.conds[int(rng.integers(len(self.conds)))])
         cond.setdefault("cfa", (info or {}).get("cfa", "RGGB"))
-        noisy = self.model.sample(unpack(clean), cond, rng)
-        params = {k: float(v) for k, v in cond.items() if isinstance(v, (int, float))}
+        noisy = self.model.sample(unpack(clean), NoiseCondition(**cond), rng)
+        params = {k: float(v) for k, v in cond.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
         return pack(np.asarray(noisy, dtype=np.float32)), params
+
+
+@dataclass
+class ProfileNoise:
+    """Noise from a calibration profile (``profiles/*.yaml``): per sample an ISO drawn
+    uniformly from ``isos`` (or log-uniformly in ``iso_range``) and the profile's model at that ISO.
+
+    Parameters
+    ----------
+    profile : str
+        Profile YAML path.
+    isos : sequence of float, optional
+        ISOs to pick from.
+    iso_range : (lo, hi), optional
+        Otherwise a log-uniform ISO in this range (inside the calibrated range).
+    camera : str, optional
+        Camera id in the profile (default: its only camera).
+    """
+
+    profile: str
+    isos: Sequence[float] | None = None
+    iso_range: tuple[float, float] | None = None
+    camera: str | None = None
+    needs_spawn: bool = False
+
+    def __post_init__(self):
+        if (self.isos is None) == (self.iso_range is None):
+            raise NoiseModelError(f"ProfileNoise({self.profile}): expected exactly one of isos=[...] or iso_range=(lo, hi)")
+        self._models: dict[float, Any] = {}
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state["_models"] = {}
+        return state
+
+    def model_at(self, iso: float):
+        if iso not in self._models:
+            from ..profiles import load_profile
+
+            if len(self._models) > 256:
+                self._models.clear()
+            self._models[iso] = load_profile(self.profile).model_for(iso, self.camera)
+        return self._models[iso]
+
+    def __call__(self, clean: np.ndarray, rng: np.random.Generator, info: dict | None = None):
+        from ..noise.base import NoiseCondition
+
+        if self.isos is not None:
+            iso = float(self.isos[int(rng.integers(len(self.isos)))])
+        else:
+            iso = float(np.exp(rng.uniform(np.log(self.iso_range[0]), np.log(self.iso_range[1]))))
+        cond = NoiseCondition(iso=iso, camera=self.camera, cfa=(info or {}).get("cfa", "RGGB"))
+        noisy = self.model_at(iso).sample(unpack(clean), cond, rng)
+        return pack(np.asarray(noisy, dtype=np.float32)), {"iso": iso}
 
 
 @dataclass
