@@ -92,7 +92,7 @@ def train_arm(name, dataset, args, log):
     model = build_dncnn(depth=args.depth, width=args.width)
     loader = make_loader(dataset, batch_size=args.batch, num_workers=0)
     t0 = time.perf_counter()
-    losses = train_dncnn(model, loader, steps=args.steps, lr=1e-3, lr_end=1e-4, log_every=100,
+    losses = train_dncnn(model, loader, steps=args.steps, lr=args.lr, lr_end=args.lr / 10, log_every=100,
                          max_seconds=args.seconds, log=lambda s: log(f"  [{name}] {s}"))
     dt = time.perf_counter() - t0
     path = save_checkpoint(model, Path(args.out) / f"dncnn_{name}.pt", arm=name, steps=len(losses), seconds=dt)
@@ -103,13 +103,15 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seconds", type=float, default=150.0, help="training time limit per arm (CPU s)")
     ap.add_argument("--steps", type=int, default=3000)
-    ap.add_argument("--depth", type=int, default=6)
-    ap.add_argument("--width", type=int, default=24)
-    ap.add_argument("--batch", type=int, default=16)
+    ap.add_argument("--depth", type=int, default=5)
+    ap.add_argument("--width", type=int, default=16)
+    ap.add_argument("--batch", type=int, default=8)
     ap.add_argument("--patch", type=int, default=32, help="packed patch side")
     ap.add_argument("--train-scenes", type=int, default=32)
     ap.add_argument("--test-scenes", type=int, default=8)
     ap.add_argument("--arms", default="gaussian,nlf,noiseflow,real")
+    ap.add_argument("--reuse", action="store_true", help="load arms already trained in --out instead of training")
+    ap.add_argument("--lr", type=float, default=2e-3)
     ap.add_argument("--out", default=str(REPO / "experiments" / "out"))
     args = ap.parse_args()
     out = Path(args.out)
@@ -169,9 +171,19 @@ def main() -> None:
                                           length=n, patch_size=args.patch, seed=1)
     models, train_info = {}, {}
     for arm, ds in arms.items():
+        ck = out / f"dncnn_{arm}.pt"
+        if args.reuse and ck.exists() and (out / "train_info.json").exists():
+            from simcam.dataset.dncnn import load_checkpoint
+
+            models[arm] = load_checkpoint(ck)
+            train_info[arm] = json.loads((out / "train_info.json").read_text())[arm]
+            log(f"reusing {ck} ({train_info[arm]['steps']} steps)")
+            continue
         log(f"training DnCNN-{arm} (depth {args.depth}, width {args.width}, {args.patch}x{args.patch} packed, "
             f"batch {args.batch}, <= {args.steps} steps / {args.seconds:.0f} s)")
         models[arm], train_info[arm] = train_arm(arm, ds, args, log)
+        old = json.loads((out / "train_info.json").read_text()) if (out / "train_info.json").exists() else {}
+        (out / "train_info.json").write_text(json.dumps({**old, arm: train_info[arm]}, indent=1))
 
     # evaluation on held-out real captures: [N images, M frames, H, W]
     noisy = np.stack([f for f, _ in test])

@@ -106,15 +106,26 @@ def as_image_list(blocks: np.ndarray | Sequence[np.ndarray], what: str) -> list[
     return out
 
 
-def pipeline_renderer(pipeline) -> Renderer:
+#: stages that need the full frame's geometry, which a block does not have
+BLOCK_SKIP_STAGES = ("crop", "lens_shading", "orientation")
+
+
+def pipeline_renderer(pipeline, *, skip: Sequence[str] = BLOCK_SKIP_STAGES) -> Renderer:
     """A renderer running a :class:`~simcam.pipeline.Pipeline` on a normalised-raw block.
 
     Blocks are already normalised raw, so a pipeline whose input is ``raw_dn``
-    must start with ``normalize``, which is skipped. The output is clipped to [0, 1].
+    must start with ``normalize``, which is skipped. Stages in ``skip`` (by
+    default those that need the full frame's geometry: active-area crop,
+    GainMap lens shading, orientation -- a SIDD block file does not say where
+    a block lies) are dropped too. Ground truth and denoised blocks go through
+    the same renderer. The output is clipped to [0, 1].
     """
     from ..pipeline import Pipeline
 
     pipe = Pipeline.from_yaml(pipeline) if isinstance(pipeline, (str, Path)) else pipeline
+    kept = [st for st in pipe.stages if st.type not in set(skip)]
+    if len(kept) != len(pipe.stages):
+        pipe = Pipeline(kept, input_kind=pipe.input_kind, name=pipe.name, source=pipe.source)
     if pipe.input_kind == "raw_dn":
         if not pipe.stages or pipe.stages[0].type != "normalize":
             raise DatasetError(f"{pipe.source or pipe.name}: stages[0]: a raw_dn pipeline must start with "
