@@ -66,7 +66,15 @@ def main() -> None:
     p = args.patch
     srcs = clean_sources(4, 2 * p + 64)
     n = args.batch * (args.batches + 1) * 2
-    cases = [("nlf", NLFNoise(beta1=(1e-4, 1e-2), beta2=(1e-6, 1e-4)))]
+    cases = [("nlf (dataset.NLFNoise)", NLFNoise(beta1=(1e-4, 1e-2), beta2=(1e-6, 1e-4)))]
+    try:
+        from simcam.dataset.noise_samplers import ProfileNoise
+
+        prof = Path(__file__).resolve().parent.parent / "profiles" / "sidd-gp.yaml"
+        if prof.exists():
+            cases.append(("nlf (profile sidd-gp, simcam.noise)", ProfileNoise(str(prof), isos=[100.0, 400.0, 800.0, 1600.0])))
+    except ImportError:
+        pass
     flow_note = None
     try:
         from simcam.noise.onnx_sampler import OnnxFlowNoise  # type: ignore[attr-defined]
