@@ -13,6 +13,7 @@ Usage: python benchmarks/dataloader.py [--patch 256] [--batch 16] [--batches 20]
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import time
@@ -29,23 +30,24 @@ def clean_sources(n: int, size: int) -> list[np.ndarray]:
     return [(0.05 + 0.9 * (a * xx + (1 - a) * yy)).astype(np.float32) for a in rng.random(n)]
 
 
-def rate(loader, n_batches: int, batch: int) -> float:
+def rate(loader, n_batches: int, batch: int) -> tuple[float, float]:
+    """(patches per wall second, patches per CPU second of this process)."""
     it = iter(loader)
     next(it)  # warm-up: worker start-up is not throughput
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     got = 0
     for _ in range(n_batches):
         b = next(it)
         got += b["noisy"].shape[0]
-    return got / (time.perf_counter() - t0)
+    return got / (time.perf_counter() - t0), got / max(time.process_time() - c0, 1e-9)
 
 
-def baseline_rng(patch: int, n: int) -> float:
+def baseline_rng(patch: int, n: int) -> tuple[float, float]:
     rng = np.random.default_rng(0)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     for _ in range(n):
         rng.standard_normal((4, patch, patch), dtype=np.float32)
-    return n / (time.perf_counter() - t0)
+    return n / (time.perf_counter() - t0), n / max(time.process_time() - c0, 1e-9)
 
 
 def main() -> None:
@@ -87,11 +89,14 @@ def main() -> None:
         flow_note = "noise-flow case skipped: simcam.noise.onnx_sampler not available in this checkout"
 
     base = [baseline_rng(p, 50) for _ in range(args.repeats)]
-    base_med = statistics.median(base)
-    print(f"patch 4x{p}x{p} float32, batch {args.batch}, {args.batches} timed batches, median of {args.repeats}")
-    print(f"baseline: numpy float32 standard_normal, main process: {base_med:,.0f} patches/s")
-    print(f"| noise | workers | patches/s (median) | vs baseline |")
-    print(f"|---|---|---|---|")
+    base_med = statistics.median(b[0] for b in base)
+    base_cpu = statistics.median(b[1] for b in base)
+    print(f"patch 4x{p}x{p} float32, batch {args.batch}, {args.batches} timed batches, median of {args.repeats}; "
+          f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}")
+    print(f"baseline: numpy float32 standard_normal, main process: {base_med:,.0f} patches/s "
+          f"({base_cpu:,.0f} per CPU-second)")
+    print("| noise | workers | patches/s (median) | vs baseline | patches per main-process CPU-s |")
+    print("|---|---|---|---|---|")
     for name, noise in cases:
         for workers in (0, 2):
             ds = NoisyPatchDataset(srcs, noise, length=n, patch_size=p, seed=0)
@@ -100,8 +105,9 @@ def main() -> None:
                 loader = make_loader(ds, batch_size=args.batch, num_workers=workers)
                 rates.append(rate(loader, args.batches, args.batch))
                 del loader
-            med = statistics.median(rates)
-            print(f"| {name} | {workers} | {med:,.0f} | {med / base_med:.2f}x |")
+            med = statistics.median(r[0] for r in rates)
+            cpu = statistics.median(r[1] for r in rates)
+            print(f"| {name} | {workers} | {med:,.0f} | {med / base_med:.2f}x | {cpu:,.0f} |")
     print("target: >= 2,000 NLF patches/s (4x256x256) with 2 workers")
     if flow_note:
         print(flow_note)
