@@ -299,7 +299,7 @@ def prnu_excess(d: CaptureData):
         return None
     m, vt, n = fm
     sig_f = robust_sigma(remove_profiles(m)) ** 2 - vt / n
-    base = np.zeros(1)
+    base = 0.0
     dm = d.dark_map()
     level = float(np.mean(m))
     if dm is not None:

@@ -133,8 +133,18 @@ def fit_hot_pixels(d, model, ctx):
 
 
 def fit_prnu(d, model, ctx):
+    """PRNU from the flat-minus-dark pixel variance; with a modelled nonlinearity y(x) the
+    measured relative spread is the linear one times the elasticity x y'(x) / y."""
     v = dg.prnu_excess(d)
-    return {"sigma": float(np.sqrt(max(v, 0.0)))}
+    sigma = float(np.sqrt(max(v, 0.0)))
+    c = model.effects.get("nonlinearity", {}).get("c", 0.0)
+    if c:
+        fm, dm = d.flat_map(), d.dark_map()
+        y = float(fm[0].mean() - (dm[0].mean() if dm is not None else np.mean(model.black_dn)))
+        s = model.full_scale_dn
+        x = (np.sqrt(max(1 + 4 * c * y / s, 1e-9)) - 1) * s / (2 * c)
+        sigma /= (x * (1 + 2 * c * x / s)) / y
+    return {"sigma": sigma}
 
 
 def fit_black_offset(d, model, ctx):
@@ -259,7 +269,14 @@ def fit_effect(effect: str, diagnostic: str, d: dg.CaptureData, model: LoopModel
     m = model.with_effect(effect, params)
     if newK is not None:
         m.K = newK
+    for other in REFIT_ON_CHANGE:  # effects whose moment estimate depends on the rest of the model
+        if other in m.effects and other != effect:
+            m.effects[other] = FITTERS[other](d, m, ctx)
     return m
+
+
+#: Effects refitted whenever another effect is added (PRNU's estimate depends on the nonlinearity).
+REFIT_ON_CHANGE = ("prnu",)
 
 
 def site_black(model: LoopModel, shape) -> np.ndarray:

@@ -17,8 +17,11 @@ Per ISO group of a capture set:
    Flow binning), NLL/dim of the model's Gaussian marginal where it has one,
    and the diagnostic's own standardised discrepancy, before and after.
 5. The effect is kept if the held-out discrepancy of its diagnostic shrinks and
-   the held-out KL does not grow (beyond ``kl_tolerance``); otherwise the
-   diagnostic is reported ``unexplained`` and left out of later choices. A
+   the held-out KL does not grow (beyond ``kl_tolerance`` relative plus twice
+   the KL's sampling floor, :func:`kl_sampling_floor`); otherwise the
+   diagnostic is left out of the choice until another effect is accepted (an
+   effect can hurt the marginal while a bigger one is still missing), and is
+   reported ``unexplained`` if it is still significant at the end. A
    significant diagnostic that names no effect, or whose effect is already in
    the model, is ``unexplained`` too. The loop stops when nothing significant
    is left (or after ``max_iterations``).
@@ -49,7 +52,7 @@ class LoopConfig:
     max_iterations: int = 10
     seed: int = 0
     max_size: int = 128  # centre crop (pixels per side) used by the loop
-    kl_tolerance: float = 0.10  # relative growth of held-out KL still accepted
+    kl_tolerance: float = 0.10  # relative growth of held-out KL still accepted (plus twice its sampling floor)
 
 
 @dataclass
@@ -143,21 +146,15 @@ def _capture(group: Group, part, sims, specs) -> dg.CaptureData:
 
 
 def noise_values(part, frames_list, specs, model: LoopModel) -> np.ndarray:
-    """Signed noise on normalised raw: dark/flat frame minus its per-plane mean, scene minus clean."""
+    """Signed noise on normalised raw: frame minus the sequence's clean level under the model
+    (black + black offset + signal of its :class:`SimSpec`), the same reference for data and
+    simulations (so discrete ADC codes fall on the same lattice in both)."""
     fs = model.full_scale_dn
+    offs = np.asarray(model.effects.get("black_level_offset", {}).get("offset_dn", [0.0] * 4))
     out = []
-    for (s, _f, clean), fr, sp in zip(part, frames_list, specs):
-        fr = fr.astype(np.float64)
-        if s.kind in ("dark", "flat"):
-            pm = np.empty_like(fr[0])
-            for dy, dx in dg.PLANE_OFFSETS:
-                pm[dy::2, dx::2] = fr[:, dy::2, dx::2].mean()
-            out.append((fr - pm).ravel() / fs)
-        else:
-            ref = clean if clean is not None else None
-            if ref is None:
-                ref = sp.signal_dn + site_map(model.black_dn.ravel(), sp.signal_dn.shape)
-            out.append((fr - ref).ravel() / fs)
+    for fr, sp in zip(frames_list, specs):
+        ref = sp.signal_dn + site_map(model.black_dn.ravel() + offs, sp.signal_dn.shape)
+        out.append((fr.astype(np.float64) - ref).ravel() / fs)
     return np.concatenate(out)
 
 
@@ -169,6 +166,13 @@ def marginal_kl(real: np.ndarray, model: np.ndarray) -> float:
     q /= q.sum()
     both = (p > 0) & (q > 0)
     return float(np.sum(p[both] * np.log(p[both] / q[both])))
+
+
+def kl_sampling_floor(real: np.ndarray, model: np.ndarray) -> float:
+    """Expected plug-in KL between two samples of the same law (Miller-Madow bias,
+    (B - 1) / 2N per sample with B occupied bins): differences below it are noise."""
+    b = int(np.count_nonzero(np.histogram(real, KL_EDGES)[0]))
+    return (b - 1) / (2 * real.size) + (b - 1) / (2 * model.size)
 
 
 def nll_per_dim(part, specs, model: LoopModel) -> float | None:
@@ -224,6 +228,7 @@ class Loop:
                 sim_stats.append(dg.compute_all(_capture(self.g, self.g.held, sims, specs), diagnostics))
         model_noise = np.concatenate(sim_noise)
         out = {"kl": marginal_kl(real, model_noise), "nll": nll_per_dim(self.g.held, specs, model),
+               "kl_floor": kl_sampling_floor(real, model_noise),
                "real_noise": real, "model_noise": model_noise[: real.size * 2]}
         for name in diagnostics:
             vals = [s[name] for s in sim_stats]
@@ -240,12 +245,13 @@ class Loop:
         tag = 0
         discs, sims = self.evaluate(model, tag)
         res.base_disc = discs
-        excluded: set[str] = set()
+        excluded: set[str] = set()  # unexplained for good
+        rejected: set[str] = set()  # effect did not help; retried once the model changes
         held_before = self.heldout(model, tag, tuple(self.applicable))
         res.heldout_base = {"kl": held_before["kl"], "nll": held_before["nll"]}
         res.plots["hist_base"] = (held_before["real_noise"], held_before["model_noise"])
         for _it in range(cfg.max_iterations):
-            sig = [d for d in discs if d.significant and d.name not in excluded]
+            sig = [d for d in discs if d.significant and d.name not in excluded | rejected]
             if not sig:
                 break
             chosen = max(sig, key=lambda d: (-np.log10(max(d.p, 1e-300)), abs(d.z)))
@@ -276,7 +282,7 @@ class Loop:
             hb = held_before.get(chosen.name)
             ha = held_after.get(chosen.name)
             diag_better = (hb is None or ha is None) or abs(ha.z) < abs(hb.z)
-            kl_ok = held_after["kl"] <= held_before["kl"] * (1 + cfg.kl_tolerance) + 1e-4
+            kl_ok = held_after["kl"] <= held_before["kl"] * (1 + cfg.kl_tolerance) + 2 * held_before["kl_floor"]
             accepted = bool(diag_better and kl_ok)
             rec = {
                 "effect": effect, "parameters": {k: v for k, v in cand.effects[effect].items()},
@@ -294,8 +300,9 @@ class Loop:
             if accepted:
                 model, discs, sims = cand, new_discs, new_sims
                 held_before = self.heldout(model, tag, tuple(self.applicable))
+                rejected.clear()
             else:
-                excluded.add(chosen.name)
+                rejected.add(chosen.name)
                 res.unexplained.append({"diagnostic": chosen.name, "discrepancy": chosen.z,
                                         "reason": f"adding {effect} did not reduce the held-out error"})
         res.model = model
@@ -308,8 +315,8 @@ class Loop:
                                         "reason": "still significant when the loop stopped"})
         # keep only those still significant under the final model
         final_sig = {d.name: d for d in discs if d.significant}
-        res.unexplained = [dict(u, discrepancy=final_sig[u["diagnostic"]].z) for u in res.unexplained
-                           if u["diagnostic"] in final_sig]
+        last = {u["diagnostic"]: u for u in res.unexplained}  # latest reason per diagnostic
+        res.unexplained = [dict(u, discrepancy=final_sig[name].z) for name, u in last.items() if name in final_sig]
         res.plots["final_sims"] = sims
         return res
 
