@@ -201,3 +201,22 @@ def write_capture_set(root: Path, captures: dict) -> Path:
         (d / "sequence.yaml").write_text(yaml.safe_dump({k: (float(v) if isinstance(v, float) else v)
                                                          for k, v in meta.items()}))
     return root
+
+
+def write_capture_set_dng(root: Path, captures: dict) -> Path:
+    """Write each sequence as ``root/<name>/frame_NNN.dng`` (simcam's DNG writer; ISO,
+    exposure, CFA, black and white levels in the tags)."""
+    from simcam.frame import CameraMeta
+    from simcam.io.dng_write import write_dng
+
+    root = Path(root)
+    for name, (_kind, frames, meta) in captures.items():
+        d = root / name
+        d.mkdir(parents=True, exist_ok=True)
+        cm = CameraMeta(make="loopgen", model="hidden-effect sensor", cfa=meta["cfa"] or "RGGB",
+                        black_level=np.full((1, 1), float(meta["black_level"])),
+                        white_level=float(meta["white_level"]), iso=float(meta["iso"]),
+                        exposure_time_s=float(meta["exposure_s"]))
+        for i, fr in enumerate(frames):
+            write_dng(d / f"frame_{i:03d}.dng", fr, cm)
+    return root

@@ -90,3 +90,28 @@ def test_cli_bad_input_is_one_line(small_set, tmp_path, capsys):
     rc = main(["loop", str(small_set), "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err.strip()
     assert rc == 2 and err.count("\n") == 0 and "expected >= 2 frames" in err
+
+
+def test_reads_dng_sequences(tmp_path):
+    from loop_generator import write_capture_set_dng
+
+    caps = capture_set(SensorSpec(height=32, width=32), n_frames=3, flat_levels=(0.4,))
+    root = write_capture_set_dng(tmp_path / "cap", caps)
+    cs = read_capture_set(root)
+    dark = cs.group(800)[0]
+    assert dark.name == "dark" and dark.cfa == "RGGB" and dark.exposure_s == pytest.approx(0.01)
+    assert np.all(dark.black_dn == 64.0) and dark.white_dn == 1023
+    np.testing.assert_array_equal(dark.frames, caps["dark"][1])
+
+
+def test_mixed_cfa_within_dng_sequence_rejected(tmp_path):
+    from simcam.frame import CameraMeta
+    from simcam.io.dng_write import write_dng
+
+    d = tmp_path / "cap" / "dark"
+    d.mkdir(parents=True)
+    for i, cfa in enumerate(("RGGB", "RGGB", "BGGR")):
+        write_dng(d / f"f{i}.dng", np.full((32, 32), 64.0, np.float32),
+                  CameraMeta(cfa=cfa, black_level=np.full((1, 1), 64.0), white_level=1023.0, iso=100.0))
+    with pytest.raises(DatasetError, match="f2.dng: cfa 'BGGR' differs from f0.dng"):
+        read_capture_set(tmp_path / "cap")

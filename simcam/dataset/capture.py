@@ -178,19 +178,21 @@ def _read_frame(f: Path, side: dict) -> tuple[np.ndarray, dict]:
             cfa = check_pattern(str(cfa), where=f"{f.parent / 'sequence.yaml'}: cfa")
         return arr.astype(np.float32), {"cfa": cfa, "black": black, "white": float(side["white_level"]),
                                         "iso": side.get("iso"), "exposure_s": side.get("exposure_s")}
-    from ..io.dng import read_dng  # DNG reader (branch dng)
+    from ..cfa import shift_pattern
+    from ..io.dng import read_dng
+    from ..stages.raw import black_level_map
 
     fr = read_dng(f)
     meta = fr.meta
     data = np.asarray(fr.data, dtype=np.float32)
-    black = np.asarray(meta.black_level, dtype=np.float64)
-    if black.size:
-        reps = black.shape
-        tile = np.tile(black, (2 // reps[0] if reps[0] <= 2 else 1, 2 // reps[1] if reps[1] <= 2 else 1))[:2, :2]
-        black = np.broadcast_to(tile, (2, 2)).copy()
-    else:
-        black = None
-    return data, {"cfa": meta.cfa, "black": black, "white": float(meta.white_level),
+    black_map = black_level_map(meta, data.shape)
+    cfa = meta.cfa
+    if meta.active_area:  # analyse the active area only (masked borders are not image pixels)
+        t, l, b, r = meta.active_area
+        data, black_map = data[t:b, l:r], black_map[t:b, l:r]
+        cfa = shift_pattern(cfa, t, l) if cfa else None
+    black = np.array([[float(np.median(black_map[dy::2, dx::2])) for dx in (0, 1)] for dy in (0, 1)])
+    return data, {"cfa": cfa, "black": black, "white": float(meta.white_level),
                   "iso": meta.iso, "exposure_s": meta.exposure_time_s}
 
 

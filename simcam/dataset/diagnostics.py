@@ -125,12 +125,13 @@ class CaptureData:
         return self.cache["dmap"]
 
     def flat_map(self) -> tuple[np.ndarray, float, int] | None:
-        """Mean map of the brightest flat, its temporal variance and frame count."""
+        """Mean map of the flat with the most frames (the brightest among equals), its temporal
+        variance and frame count."""
         if "fmap" not in self.cache:
             if not self.flats:
                 self.cache["fmap"] = None
             else:
-                f = max(self.flats, key=lambda a: float(a.mean())).astype(np.float64)
+                f = max(self.flats, key=lambda a: (a.shape[0], float(a.mean()))).astype(np.float64)
                 self.cache["fmap"] = (f.mean(0), float(np.mean(np.var(f, axis=0, ddof=1))), f.shape[0])
         return self.cache["fmap"]
 

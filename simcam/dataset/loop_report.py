@@ -234,7 +234,7 @@ def figures(r: GroupResult, seed: int = 0) -> dict[str, str]:
         ax.legend(fontsize=8)
     fig.tight_layout()
     out["spectra"] = _png(fig)
-    maps = [(n, m) for n, m in (("dark", d.dark_map()), ("brightest flat", d.flat_map())) if m is not None]
+    maps = [(n, m) for n, m in (("dark", d.dark_map()), ("flat", d.flat_map())) if m is not None]
     if maps:
         fig, axes = plt.subplots(1, len(maps), figsize=(5.2 * len(maps), 4.2), squeeze=False)
         for ax, (name, (m, _vt, n)) in zip(axes[0], maps):
