@@ -96,3 +96,22 @@ def test_detection_matrix(case):
     r = run_case(case)
     assert set(r.model.effects) == set(case)
     assert r.unexplained == []
+
+
+def test_scene_only_set_with_clean_reference(tmp_path):
+    # no dark, no flat: the base gain comes from binned per-pixel variance against the clean level
+    from loop_matrix import in_memory_capture
+    from simcam.dataset.loop import LoopConfig, run_loop
+
+    spec = SensorSpec(height=32, width=32)
+    caps = capture_set(spec, n_frames=8, flat_levels=(), scene=True)
+    del caps["dark"]
+    cs = in_memory_capture(caps)
+    _yy, xx = np.mgrid[0:32, 0:32]
+    site = np.ones((32, 32))
+    for k, (dy, dx) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):
+        site[dy::2, dx::2] = (0.8, 1.0, 1.0, 0.7)[k]
+    cs.sequences[0].clean = (spec.black_dn + (0.1 + 0.5 * xx / 32) * (spec.white_dn - spec.black_dn) * site)
+    r = run_loop(cs, LoopConfig(replicates=8, heldout_replicates=4))[0]
+    # K from 20 intensity bins of ~50 pixels x 4 frames each: SE ~ 5 % -> 20 % tolerance
+    assert r.base.K == pytest.approx(2.0, rel=0.2)

@@ -115,3 +115,26 @@ def test_mixed_cfa_within_dng_sequence_rejected(tmp_path):
                   CameraMeta(cfa=cfa, black_level=np.full((1, 1), 64.0), white_level=1023.0, iso=100.0))
     with pytest.raises(DatasetError, match="f2.dng: cfa 'BGGR' differs from f0.dng"):
         read_capture_set(tmp_path / "cap")
+
+
+def test_reads_sidd_style_scene(tmp_path):
+    import shutil
+
+    import scipy.io
+
+    from conftest import shared_path
+
+    md = shared_path("sidd/0001_METADATA_RAW_010.MAT")
+    d = tmp_path / "cap" / "0001_001_S6_00100_00060_3200_L"
+    d.mkdir(parents=True)
+    shutil.copy(md, d / "0001_METADATA_RAW_010.MAT")  # into the test's temp dir only
+    rng = np.random.default_rng(0)
+    gt = np.full((32, 32), 0.25)
+    for k in ("010", "011"):
+        scipy.io.savemat(d / f"0001_NOISY_RAW_{k}.MAT", {"x": gt + rng.normal(0, 0.01, gt.shape)})
+    scipy.io.savemat(d / "0001_GT_RAW_010.MAT", {"x": gt})
+    cs = read_capture_set(tmp_path / "cap")
+    s = cs.sequences[0]
+    assert s.kind == "scene" and s.n == 2 and s.cfa == "GRBG" and s.iso == 100
+    np.testing.assert_allclose(s.clean, 0.25 * 1023.0)
+    assert s.frames.std() == pytest.approx(0.01 * 1023, rel=0.1)

@@ -38,3 +38,18 @@ def test_emva_dsnu_prnu(emva):
     got, ref = emva
     for key in ("dsnu_e", "prnu_percent"):
         assert got[key] == pytest.approx(ref[key], rel=0.03), key
+
+
+@pytest.mark.slow
+def test_loop_on_emva_set_reports_before_after(tmp_path):
+    from simcam.dataset.loop_report import run_and_write
+    from simcam.dataset.loop import LoopConfig
+
+    desc = shared_path("emva1288_ccd/EMVA1288_Data.txt")
+    doc = run_and_write(desc.parent, tmp_path / "out", cfg=LoopConfig(max_size=64))
+    assert doc["emva"]["K_dn_per_e"] == pytest.approx(0.2801, rel=0.03)
+    g = doc["isos"][0]
+    for it in g["iterations"]:
+        h = it["heldout"]
+        assert h["kl_before"] is not None and h["kl_after"] is not None
+    assert g["heldout"]["kl_final"] <= g["heldout"]["kl_base"]

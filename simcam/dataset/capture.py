@@ -116,6 +116,8 @@ def _frame_files(d: Path) -> list[Path]:
 def _read_sequence_dir(d: Path) -> Sequence:
     import yaml
 
+    if any(p.name.upper().find("NOISY_RAW") >= 0 and p.suffix.upper() == ".MAT" for p in d.iterdir()):
+        return _read_sidd_dir(d)
     files = _frame_files(d)
     if not files:
         raise DatasetError(f"{d}: no frames; expected *.dng or *.npy files")
@@ -194,6 +196,48 @@ def _read_frame(f: Path, side: dict) -> tuple[np.ndarray, dict]:
     black = np.array([[float(np.median(black_map[dy::2, dx::2])) for dx in (0, 1)] for dy in (0, 1)])
     return data, {"cfa": cfa, "black": black, "white": float(meta.white_level),
                   "iso": meta.iso, "exposure_s": meta.exposure_time_s}
+
+
+def _read_sidd_dir(d: Path) -> Sequence:
+    """A SIDD scene directory: ``*NOISY_RAW_*.MAT`` frames, ``*GT_RAW_*.MAT`` clean reference,
+    ``*METADATA_RAW_*.MAT`` tags (Abdelhamed et al., CVPR 2018). The .MAT images (variable
+    ``x``) are normalised raw in [0, 1]; they are turned back into DN with the metadata's black
+    and white levels."""
+    from ..io.sidd import _load_mat, read_sidd_meta
+    from ..stages.raw import black_level_map
+
+    def find(tag):
+        return sorted(p for p in d.iterdir() if tag in p.name.upper() and p.suffix.upper() == ".MAT")
+
+    metas = find("METADATA_RAW")
+    if not metas:
+        raise DatasetError(f"{d}: SIDD scene without *METADATA_RAW_*.MAT; expected the tag file beside the frames")
+    meta = read_sidd_meta(metas[0])
+
+    def image(path):
+        v = _load_mat(path, DatasetError)
+        x = v.get("x", next((a for a in v.values() if isinstance(a, np.ndarray) and a.ndim == 2), None))
+        if x is None or np.ndim(x) != 2:
+            raise DatasetError(f"{path}: no 2-D image variable 'x'; expected a SIDD RAW .MAT")
+        return np.asarray(x, dtype=np.float64)
+
+    noisy = [image(p) for p in find("NOISY_RAW")]
+    for p, x in zip(find("NOISY_RAW"), noisy):
+        if x.shape != noisy[0].shape:
+            raise DatasetError(f"{p}: size {x.shape} differs from the first noisy frame {noisy[0].shape}; "
+                               "expected one size per sequence")
+    if len(noisy) < 2:
+        raise DatasetError(f"{d}: sequence has 1 frame; expected >= 2 frames of the same scene "
+                           "(temporal variance needs frame pairs)")
+    black_map = black_level_map(meta, noisy[0].shape).astype(np.float64)
+    scale = float(meta.white_level) - black_map
+    frames = np.stack([x * scale + black_map for x in noisy]).astype(np.float32)
+    gts = find("GT_RAW")
+    clean = (image(gts[0]) * scale + black_map) if gts else None
+    black = np.array([[float(np.median(black_map[dy::2, dx::2])) for dx in (0, 1)] for dy in (0, 1)])
+    return Sequence(name=d.name, kind="scene", frames=frames, iso=int(round(meta.iso or 0)),
+                    exposure_s=meta.exposure_time_s, cfa=meta.cfa, black_dn=black, white_dn=float(meta.white_level),
+                    clean=clean, source=str(d))
 
 
 def _check_set(cs: CaptureSet, check_saturation: bool) -> None:

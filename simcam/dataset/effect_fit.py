@@ -64,7 +64,7 @@ def _scene_ptc(d: dg.CaptureData) -> tuple[float, float]:
     edges = np.quantile(x, np.linspace(0, 1, 21))
     idx = np.clip(np.digitize(x, edges) - 1, 0, 19)
     bx = np.array([x[idx == i].mean() for i in range(20) if np.any(idx == i)])
-    by = np.array([np.median(y[idx == i]) for i in range(20) if np.any(idx == i)])
+    by = np.array([np.mean(y[idx == i]) for i in range(20) if np.any(idx == i)])  # mean: unbiased (ddof=1)
     K, v0 = np.polyfit(bx - black, by, 1)
     return float(K), float(max(v0, 0.1))
 
