@@ -62,12 +62,18 @@ def test_cli_end_to_end_and_heldout_kl_drop(tmp_path):
     # held-out marginal KL drops by >= 80 % from the base fit
     assert g["heldout"]["kl_final"] <= 0.2 * g["heldout"]["kl_base"]
     prof = yaml.safe_load((out / "profile.yaml").read_text())
-    assert prof["isos"][0]["effects"]["quantization"]["step_dn"] == 4.0
+    entry = prof["cameras"][0]["entries"][0]
+    assert entry["iso"] == 800.0 and entry["model"]["type"] == "composite"
+    effects = {e["type"]: e for e in entry["model"]["effects"]}
+    assert effects["quantization"]["step_dn"] == 4.0 and effects["quantization"]["range_dn"] == 959.0
+    assert effects["dsnu"]["sigma"] == pytest.approx(2.5 / 959.0, rel=0.15)
+    own = yaml.safe_load((out / "loop_model.yaml").read_text())
+    assert own["isos"][0]["effects"]["quantization"]["step_dn"] == 4.0
     html = (out / "report.html").read_text()
     assert html.count("data:image/png;base64,") == 4
-    # starting from the written profile, nothing is left to add
+    # starting from the written model, nothing is left to add
     out2 = tmp_path / "out2"
-    assert main(["loop", str(cap), "--out", str(out2), "--start-profile", str(out / "profile.yaml")]) == 0
+    assert main(["loop", str(cap), "--out", str(out2), "--start-profile", str(out / "loop_model.yaml")]) == 0
     doc2 = json.loads((out2 / "report.json").read_text())
     assert [i for i in doc2["isos"][0]["iterations"] if i["accepted"]] == []
 

@@ -10,8 +10,8 @@ import typer
 
 def loop(
     capture_dir: Path = typer.Argument(..., help="Capture set: directory of dark*/flat*/scene sequences, or an EMVA 1288 descriptor."),
-    out: Path = typer.Option(..., "--out", help="Output directory (profile.yaml, report.json, report.html)."),
-    start_profile: Optional[Path] = typer.Option(None, "--start-profile", help="Start from this profile's models instead of the base fit."),
+    out: Path = typer.Option(..., "--out", help="Output directory (profile.yaml, loop_model.yaml, report.json, report.html)."),
+    start_profile: Optional[Path] = typer.Option(None, "--start-profile", help="Start from this profile's models (a profile.yaml or loop_model.yaml written by simcam loop) instead of the base fit."),
     seed: int = typer.Option(0, "--seed", help="Seed of the parametric bootstrap."),
     replicates: int = typer.Option(16, "--replicates", help="Bootstrap replicates per diagnostic evaluation (>= 4)."),
     alpha: float = typer.Option(0.01, "--alpha", help="Family-wise significance level (Holm)."),
@@ -37,7 +37,7 @@ def loop(
     if doc.get("emva"):
         e = doc["emva"]
         typer.echo(f"EMVA 1288: K = {e['K_dn_per_e']:.4f} DN/e-, sigma_d = {e['sigma_dark_e']:.2f} e-")
-    typer.echo(f"wrote {out / 'profile.yaml'}, {out / 'report.json'}, {out / 'report.html'}")
+    typer.echo(f"wrote {out / 'profile.yaml'}, {out / 'loop_model.yaml'}, {out / 'report.json'}, {out / 'report.html'}")
 
 
 def register(app: typer.Typer) -> None:

@@ -1,4 +1,5 @@
-"""Outputs of ``simcam loop``: report.json, profile.yaml and report.html (plots as base64 PNGs).
+"""Outputs of ``simcam loop``: profile.yaml (noise-stage profile), loop_model.yaml (the loop's own
+model in DN), report.json and report.html (plots as base64 PNGs).
 
 The JSON schema is documented in the README ("Calibration loop report").
 """
@@ -87,8 +88,9 @@ def build_report(results: list[GroupResult], capture, cfg: LoopConfig, emva: dic
 
 # ------------------------------------------------------------------ profile
 
-def profile_dict(results: list[GroupResult], capture, camera_id: str | None = None) -> dict:
-    """Calibration profile of the final models (effect names of simcam's noise vocabulary).
+def loop_model_dict(results: list[GroupResult], capture, camera_id: str | None = None) -> dict:
+    """The loop's own record of its final models (DN units, exactly what it simulated; effect names
+    of simcam's noise vocabulary); ``--start-profile`` reads it back losslessly.
 
     Base model per ISO as a Poisson-Gaussian on normalised raw (beta1 = K / (white - black),
     beta2 = read^2 / (white - black)^2, seed eq. 3.6) plus the same in DN.
@@ -116,14 +118,14 @@ def profile_dict(results: list[GroupResult], capture, camera_id: str | None = No
     }
 
 
-def write_profile(path: Path, prof: dict) -> None:
+def write_yaml(path: Path, doc: dict) -> None:
     import yaml
 
-    Path(path).write_text(yaml.safe_dump(prof, sort_keys=False))
+    Path(path).write_text(yaml.safe_dump(_clean(doc), sort_keys=False))
 
 
 def read_start_profile(path: Path) -> dict[int, LoopModel]:
-    """LoopModels per ISO from a profile written by :func:`write_profile`."""
+    """LoopModels per ISO from ``loop_model.yaml`` or a noise-stage ``profile.yaml`` written by simcam loop."""
     import yaml
 
     try:
@@ -132,6 +134,10 @@ def read_start_profile(path: Path) -> dict[int, LoopModel]:
         raise ProfileError(f"{path}: start profile not found") from None
     except yaml.YAMLError as exc:
         raise ProfileError(f"{path}: not valid YAML ({str(exc).splitlines()[0]})") from None
+    if isinstance(doc, dict) and "cameras" in doc:
+        from .loop_profile import models_from_noise_profile
+
+        return models_from_noise_profile(doc, str(path))
     if not isinstance(doc, dict) or doc.get("schema_version") != PROFILE_SCHEMA or "isos" not in doc:
         raise ProfileError(f"{path}: schema_version {doc.get('schema_version') if isinstance(doc, dict) else None!r}; "
                            f"expected {PROFILE_SCHEMA} with an 'isos' list (a profile written by simcam loop)")
@@ -372,7 +378,10 @@ def run_and_write(capture_dir: str | Path, out_dir: str | Path, *, start_profile
     emva = {iso: emva1288_numbers(capture.group(iso)) for iso in capture.isos()}
     doc = build_report(results, capture, cfg, emva)
     out_dir.mkdir(parents=True, exist_ok=True)
-    write_profile(out_dir / "profile.yaml", profile_dict(results, capture))
+    from .loop_profile import noise_profile
+
+    write_yaml(out_dir / "profile.yaml", noise_profile(results, capture))
+    write_yaml(out_dir / "loop_model.yaml", loop_model_dict(results, capture))
     (out_dir / "report.json").write_text(json.dumps(doc, indent=2))
     figs = {r.iso: figures(r, cfg.seed) for r in results}
     write_html(out_dir / "report.html", doc, figs)
