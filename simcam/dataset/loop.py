@@ -130,15 +130,8 @@ class Group:
             else:
                 ref = clean if clean is not None else f.astype(np.float64).mean(0)
                 sig = ref - base
-            out.append(SimSpec(s.kind if s.kind != "scene" else "scene", f.shape[0], sig,
-                               fixed_in_clean=(s.kind == "scene" and clean is None)))
-        # scenes are ordered after darks/flats in CaptureData; keep spec order = part order
+            out.append(SimSpec(s.kind, f.shape[0], sig, fixed_in_clean=(s.kind == "scene" and clean is None)))
         return out
-
-
-def _order_like_data(part, sims):
-    """Re-order simulated stacks (part order) into CaptureData's dark/flat/scene order."""
-    return sims
 
 
 def _capture(group: Group, part, sims, specs) -> dg.CaptureData:
@@ -275,7 +268,7 @@ class Loop:
                 res.unexplained.append({"diagnostic": chosen.name, "discrepancy": chosen.z,
                                         "reason": "needs a dark sequence to fit"})
                 continue
-            cand = fit_effect(effect, chosen.name, self._dark_view() if effect in ("heavy_tail_read", "spatial_correlation") else self.g.fit_data, model, ctx)
+            cand = fit_effect(effect, chosen.name, self.g.fit_data, model, ctx)
             new_discs, new_sims = self.evaluate(cand, tag)
             after = next(d for d in new_discs if d.name == chosen.name)
             held_after = self.heldout(cand, tag, (chosen.name,))
@@ -319,9 +312,6 @@ class Loop:
         res.unexplained = [dict(u, discrepancy=final_sig[name].z) for name, u in last.items() if name in final_sig]
         res.plots["final_sims"] = sims
         return res
-
-    def _dark_view(self) -> dg.CaptureData:
-        return self.g.fit_data
 
 
 def run_loop(capture: CaptureSet, cfg: LoopConfig | None = None,

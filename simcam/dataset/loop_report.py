@@ -43,6 +43,13 @@ def _clean(v):
     return v
 
 
+def _plane_ptc(r: GroupResult) -> dict | None:
+    from .photon_transfer import plane_ptc
+
+    darks, flats = r.plots["group"].fit_data.ptc_points()
+    return plane_ptc(darks, flats, r.base.full_scale_dn)
+
+
 def build_report(results: list[GroupResult], capture, cfg: LoopConfig, emva: dict[int, dict | None]) -> dict:
     """The report.json document (see the README for the schema)."""
     isos = []
@@ -53,6 +60,7 @@ def build_report(results: list[GroupResult], capture, cfg: LoopConfig, emva: dic
             "effects": list(r.model.effects),
             "unexplained": [{"diagnostic": u["diagnostic"], "discrepancy": u["discrepancy"], "reason": u["reason"]}
                             for u in r.unexplained],
+            "photon_transfer": _plane_ptc(r),
             "base_model": r.base.to_dict(),
             "model": r.model.to_dict(),
             "diagnostics_base": [_disc_dict(d) for d in r.base_disc],

@@ -16,105 +16,38 @@ spatial variance of the L-frame averages corrected by the temporal variance / L.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import DatasetError
 from .capture import Sequence
 
 PLANE_OFFSETS = ((0, 0), (0, 1), (1, 0), (1, 1))
 
 
-def planes(frames: np.ndarray) -> list[np.ndarray]:
-    """The four 2x2-site planes of (..., H, W) frames (a mono sensor has four identical-statistics planes)."""
-    return [frames[..., dy::2, dx::2] for dy, dx in PLANE_OFFSETS]
+def plane_ptc(darks: list[np.ndarray], flats: list[np.ndarray], full_scale_dn: float) -> dict | None:
+    """Per-CFA-plane photon transfer (NLF) from ``(4, 2)`` (mean, temporal variance) points per sequence.
 
-
-def temporal_mean_var(frames: np.ndarray) -> tuple[float, float]:
-    """(mean, temporal variance) in DN and DN^2 of (n, h, w) frames of one plane.
-
-    Variance: per-pixel variance over frames (ddof=1) after removing each
-    frame's spatial mean, averaged over pixels; for n = 2 this is EMVA 1288's
-    half variance of the difference image.
-    """
-    f = frames.astype(np.float64)
-    fm = f.mean(axis=(1, 2), keepdims=True)
-    mean = float(fm.mean())
-    r = f - fm
-    var = float(np.mean(np.var(r, axis=0, ddof=1)))
-    return mean, var
-
-
-@dataclass
-class PlaneStats:
-    """Temporal statistics of one sequence, per 2x2 site plane."""
-
-    name: str
-    kind: str
-    exposure_s: float | None
-    photons: float | None
-    mean: np.ndarray  # (4,) DN
-    var: np.ndarray  # (4,) DN^2
-    n: int
-
-    @property
-    def mean_all(self) -> float:
-        return float(self.mean.mean())
-
-    @property
-    def var_all(self) -> float:
-        return float(self.var.mean())
-
-
-def sequence_stats(seq: Sequence, frames: np.ndarray | None = None) -> PlaneStats:
-    fr = seq.frames if frames is None else frames
-    mv = np.array([temporal_mean_var(p) for p in planes(fr)])
-    return PlaneStats(seq.name, seq.kind, seq.exposure_s, seq.photons, mv[:, 0], mv[:, 1], fr.shape[0])
-
-
-@dataclass
-class PTCFit:
-    """Poisson-Gaussian photon-transfer fit: var = K_c * (mu - mu_dark) + var_dark, per plane.
-
-    ``K`` pooled system gain (DN/e-), ``K_plane`` per plane, ``var_dark``
-    temporal dark variance per plane (DN^2), ``mu_dark`` dark mean per plane (DN).
-    """
-
-    K: float
-    K_plane: np.ndarray
-    var_dark: np.ndarray
-    mu_dark: np.ndarray
-    points: list[PlaneStats]
-    from_dark: bool
-
-
-def fit_ptc(darks: list[PlaneStats], flats: list[PlaneStats]) -> PTCFit:
-    """Fit K per plane (zero-intercept slope of the dark-corrected variance vs mean) and pooled.
-
-    With darks the dark point is the average of the dark sequences; without, a
-    line with intercept is fitted to the flats (intercept = dark variance at
-    the black level ``mu_dark`` = NaN, unknown).
+    var = K_c * (mu - mu_dark_c) + var_dark_c with K_c the zero-intercept slope of the
+    dark-corrected points (or, without darks, a line with intercept); returned also as the
+    NLF on normalised raw, beta1_c = K_c / full_scale, beta2_c = var_dark_c / full_scale^2
+    (seed eq. 3.8). None without a lit sequence.
     """
     if not flats:
-        raise DatasetError("photon transfer: no flat (or scene) sequence; expected at least one lit sequence")
-    X = np.array([f.mean for f in flats])  # (m, 4)
-    Y = np.array([f.var for f in flats])
+        return None
+    X = np.array([f[:, 0] for f in flats])
+    Y = np.array([f[:, 1] for f in flats])
     if darks:
-        mu_d = np.mean([d.mean for d in darks], axis=0)
-        var_d = np.mean([d.var for d in darks], axis=0)
-        x, y = X - mu_d, Y - var_d
-        K_plane = (x * y).sum(0) / (x * x).sum(0)
-        K = float((x * y).sum() / (x * x).sum())
-        return PTCFit(K, K_plane, var_d, mu_d, darks + flats, True)
-    if len(flats) < 2:
-        raise DatasetError("photon transfer: no dark sequence and a single flat; expected a dark sequence or >= 2 "
-                           "flat levels to separate gain from read noise")
-    K_plane, var_d = np.empty(4), np.empty(4)
-    for c in range(4):
-        K_plane[c], var_d[c] = np.polyfit(X[:, c], Y[:, c], 1)
-    K = float(np.mean(K_plane))
-    return PTCFit(K, K_plane, var_d, np.full(4, np.nan), list(flats), False)
+        mu0 = np.mean([d[:, 0] for d in darks], axis=0)
+        v0 = np.mean([d[:, 1] for d in darks], axis=0)
+        x, y = X - mu0, Y - v0
+        K = (x * y).sum(0) / (x * x).sum(0)
+    elif len(flats) >= 2:
+        fits = np.array([np.polyfit(X[:, c], Y[:, c], 1) for c in range(4)])
+        K, v0, mu0 = fits[:, 0], fits[:, 1], np.full(4, np.nan)
+    else:
+        return None
+    return {"K_dn_per_e": K.tolist(), "var_dark_dn2": np.asarray(v0).tolist(), "mu_dark_dn": np.asarray(mu0).tolist(),
+            "nlf_beta1": (K / full_scale_dn).tolist(), "nlf_beta2": (np.asarray(v0) / full_scale_dn ** 2).tolist()}
 
 
 # --------------------------------------------------------------------------- EMVA 1288
