@@ -44,7 +44,7 @@ def main():
         if j == 0:
             print(f"seed {seed}")
             print(f"{'hidden effects':34s} {'named by the loop':34s} {'unexplained':12s} {'KL base':>9s} "
-                  f"{'KL final':>9s} {'drop':>5s} ok  fitted (hidden) parameters")
+                  f"{'KL final':>9s} {'floor':>9s} {'drop':>5s} ok  fitted (hidden) parameters")
         misses = []
         for case in CASES:
             r = run_case(case, seed=seed)
@@ -60,7 +60,7 @@ def main():
                 pars = "; ".join(f"{e}: {_short(r.model.effects[e])} ({_short(DEFAULT_EFFECTS[e])})"
                                  for e in case if e in r.model.effects)
                 print(f"{'+'.join(case) or '(base only)':34s} {'+'.join(named) or '-':34s} {un:12s} {kb:9.2e} "
-                      f"{kf:9.2e} {drop:>5s} {'yes' if ok else 'NO ':3s} {pars}")
+                      f"{kf:9.2e} {r.heldout_final['kl_floor']:9.2e} {drop:>5s} {'yes' if ok else 'NO ':3s} {pars}")
         print(f"seed {seed}: {n_ok}/{len(CASES)} cases named exactly ({time.perf_counter() - t0:.0f} s)"
               + ("" if not misses else "; misses: " + " | ".join(misses)))
 

@@ -241,7 +241,7 @@ class Loop:
         excluded: set[str] = set()  # unexplained for good
         rejected: set[str] = set()  # effect did not help; retried once the model changes
         held_before = self.heldout(model, tag, tuple(self.applicable))
-        res.heldout_base = {"kl": held_before["kl"], "nll": held_before["nll"]}
+        res.heldout_base = {"kl": held_before["kl"], "nll": held_before["nll"], "kl_floor": held_before["kl_floor"]}
         res.plots["hist_base"] = (held_before["real_noise"], held_before["model_noise"])
         for _it in range(cfg.max_iterations):
             sig = [d for d in discs if d.significant and d.name not in excluded | rejected]
@@ -300,7 +300,7 @@ class Loop:
                                         "reason": f"adding {effect} did not reduce the held-out error"})
         res.model = model
         res.final = discs
-        res.heldout_final = {"kl": held_before["kl"], "nll": held_before["nll"]}
+        res.heldout_final = {"kl": held_before["kl"], "nll": held_before["nll"], "kl_floor": held_before["kl_floor"]}
         listed = {u["diagnostic"] for u in res.unexplained}
         for d in discs:
             if d.significant and d.name not in listed:

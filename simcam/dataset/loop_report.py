@@ -66,6 +66,7 @@ def build_report(results: list[GroupResult], capture, cfg: LoopConfig, emva: dic
             "diagnostics_base": [_disc_dict(d) for d in r.base_disc],
             "diagnostics_final": [_disc_dict(d) for d in r.final],
             "heldout": {"kl_base": r.heldout_base["kl"], "kl_final": r.heldout_final["kl"],
+                        "kl_sampling_floor": r.heldout_final["kl_floor"],
                         "nll_base": r.heldout_base["nll"], "nll_final": r.heldout_final["nll"]},
             "emva": emva.get(r.iso),
             "notes": r.notes,
