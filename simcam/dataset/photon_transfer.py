@@ -57,7 +57,29 @@ def _linear_b0(x, y):
 
 
 def emva1288_numbers(seqs: list[Sequence]) -> dict | None:
-    """EMVA 1288 K, sigma_d, DSNU1288 and PRNU1288 (reference-implementation procedure).
+    """EMVA 1288 numbers of a capture set: for a CFA sensor computed on each 2x2-site plane
+    (EMVA 1288 evaluates each colour channel on its own) and averaged, with the per-plane
+    values under ``"planes"``; for a monochrome sensor on the whole image."""
+    if not seqs or seqs[0].cfa is None:
+        return emva1288_mono(seqs)
+    import dataclasses
+
+    per = []
+    for dy, dx in PLANE_OFFSETS:
+        sub = [dataclasses.replace(s, frames=s.frames[:, dy::2, dx::2]) for s in seqs]
+        per.append(emva1288_mono(sub))
+    if any(p is None for p in per):
+        return None
+    out = {}
+    for k in ("K_dn_per_e", "sigma_dark_e", "sigma_y_dark_dn", "dsnu_e", "prnu_percent"):
+        vals = [p[k] for p in per]
+        out[k] = None if any(v is None for v in vals) else float(np.mean(vals))
+    out["planes"] = per
+    return out
+
+
+def emva1288_mono(seqs: list[Sequence]) -> dict | None:
+    """EMVA 1288 K, sigma_d, DSNU1288 and PRNU1288 of one channel (reference-implementation procedure).
 
     Temporal points: every dark/flat sequence with exactly 2 frames; each flat
     is paired with the dark of the same exposure time (else the dark of the
@@ -131,7 +153,7 @@ def emva1288_numbers(seqs: list[Sequence]) -> dict | None:
         if s2_d >= 0:
             out["dsnu_e"] = float(np.sqrt(s2_d) / K)
         if s_flats:
-            sf = max(s_flats, key=lambda s: s.n)
+            sf = max(s_flats, key=lambda s: (s.n, float(s.frames.mean())))
             avg_f, s2_f = _spatial(sf.frames)
             if s2_f - s2_d >= 0:
                 out["prnu_percent"] = float(np.sqrt(s2_f - s2_d) * 100 / (avg_f.mean() - avg_d.mean()))
