@@ -53,3 +53,19 @@ def test_loop_on_emva_set_reports_before_after(tmp_path):
         h = it["heldout"]
         assert h["kl_before"] is not None and h["kl_after"] is not None
     assert g["heldout"]["kl_final"] <= g["heldout"]["kl_base"]
+
+
+def test_emva_numbers_on_generated_cfa_set_match_the_generator():
+    # K = 2 DN/e-, read 3 DN -> sigma_d = 1.5 e-. Per plane 32x32 px, 12-frame pairs: K SE ~ 2 %,
+    # dark variance SE ~ 1.4 % -> 6 % tolerance; PRNU 2 % from a 32x32 map of a 12-frame flat (SE ~ 3 %).
+    import numpy as np
+
+    from loop_generator import DEFAULT_EFFECTS, SensorSpec, capture_set
+    from loop_matrix import in_memory_capture
+
+    cs = in_memory_capture(capture_set(SensorSpec(effects={"prnu": DEFAULT_EFFECTS["prnu"]})))
+    e = emva1288_numbers(cs.sequences)
+    assert e["K_dn_per_e"] == pytest.approx(2.0, rel=0.06)
+    assert e["sigma_dark_e"] == pytest.approx(1.5, rel=0.06)
+    assert e["prnu_percent"] == pytest.approx(2.0, rel=0.15)
+    assert len(e["planes"]) == 4 and np.isfinite(e["dsnu_e"] or 0.0)
