@@ -17,8 +17,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from loop_generator import DEFAULT_EFFECTS  # noqa: E402
-from loop_matrix import CASES, run_case  # noqa: E402
+from loop_matrix import CASES, run_case, scaled  # noqa: E402
 
 
 def _short(params: dict) -> str:
@@ -37,7 +36,10 @@ def _short(params: dict) -> str:
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", default="7")
+    ap.add_argument("--scale", type=float, default=1.0, help="effect magnitude relative to DEFAULT_EFFECTS")
+    ap.add_argument("--singles", action="store_true", help="only the 13 single-effect cases")
     args = ap.parse_args()
+    cases = [c for c in CASES if len(c) == 1] if args.singles else CASES
     seeds = [int(s) for s in args.seeds.split(",")]
     for j, seed in enumerate(seeds):
         n_ok, t0 = 0, time.perf_counter()
@@ -46,8 +48,8 @@ def main():
             print(f"{'hidden effects':34s} {'named by the loop':34s} {'unexplained':12s} {'KL base':>9s} "
                   f"{'KL final':>9s} {'floor':>9s} {'drop':>5s} ok  fitted (hidden) parameters")
         misses = []
-        for case in CASES:
-            r = run_case(case, seed=seed)
+        for case in cases:
+            r = run_case(case, seed=seed, scale=args.scale)
             named = tuple(r.model.effects)
             un = ",".join(u["diagnostic"] for u in r.unexplained) or "-"
             ok = set(case) == set(named) and not r.unexplained
@@ -57,11 +59,11 @@ def main():
             if j == 0:
                 kb, kf = r.heldout_base["kl"], r.heldout_final["kl"]
                 drop = f"{100 * (1 - kf / kb):.0f}%" if kb > 0 and named else "-"
-                pars = "; ".join(f"{e}: {_short(r.model.effects[e])} ({_short(DEFAULT_EFFECTS[e])})"
+                pars = "; ".join(f"{e}: {_short(r.model.effects[e])} ({_short(scaled(e, args.scale))})"
                                  for e in case if e in r.model.effects)
                 print(f"{'+'.join(case) or '(base only)':34s} {'+'.join(named) or '-':34s} {un:12s} {kb:9.2e} "
                       f"{kf:9.2e} {r.heldout_final['kl_floor']:9.2e} {drop:>5s} {'yes' if ok else 'NO ':3s} {pars}")
-        print(f"seed {seed}: {n_ok}/{len(CASES)} cases named exactly ({time.perf_counter() - t0:.0f} s)"
+        print(f"seed {seed}, scale {args.scale}: {n_ok}/{len(cases)} cases named exactly ({time.perf_counter() - t0:.0f} s)"
               + ("" if not misses else "; misses: " + " | ".join(misses)))
 
 

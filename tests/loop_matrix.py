@@ -28,10 +28,28 @@ def in_memory_capture(caps: dict):
     return CaptureSet("memory", "directory", seqs)
 
 
-def run_case(effects: tuple, seed: int = 7, **spec_kw):
+def scaled(effect: str, scale: float) -> dict:
+    """``DEFAULT_EFFECTS[effect]`` with its magnitude scaled (shape parameters kept; quantisation
+    and Tukey shape moved towards their no-effect values 1 and 0.14)."""
+    p = dict(DEFAULT_EFFECTS[effect])
+    if scale == 1.0:
+        return p
+    for k in ("sigma_dn", "sigma", "amplitude_dn", "offset_dn", "mean_dn", "a", "c"):
+        if k in p:
+            p[k] = p[k] * scale
+    if "gains" in p:
+        p["gains"] = [1 + (g - 1) * scale for g in p["gains"]]
+    if "lam" in p:
+        p["lam"] = 0.14 + (p["lam"] - 0.14) * scale
+    if "step_dn" in p:
+        p["step_dn"] = max(1, round(1 + (p["step_dn"] - 1) * scale))
+    return p
+
+
+def run_case(effects: tuple, seed: int = 7, scale: float = 1.0, **spec_kw):
     from simcam.dataset.loop import LoopConfig, run_loop
 
-    spec = SensorSpec(effects={e: DEFAULT_EFFECTS[e] for e in effects}, **spec_kw)
+    spec = SensorSpec(effects={e: scaled(e, scale) for e in effects}, **spec_kw)
     return run_loop(in_memory_capture(capture_set(spec, seed=seed)), LoopConfig())[0]
 
 
