@@ -13,7 +13,7 @@ diagnostic              effect              statistic
 ptc_curvature           nonlinearity        quadratic / linear coefficient of variance vs mean
 plane_gain_spread       channel_gain        std / mean of the per-CFA-plane photon-transfer slopes
 row_mean_excess         row_noise           var(row means of temporal residual) / (pixel var / W)
-row_spectrum_peak       periodic_pattern    max / median of the periodogram of row means
+row_spectrum_peak       periodic_pattern    max / median of the (per-frame whitened) periodogram of row means
 col_spectrum_peak       periodic_pattern    same along columns
 col_temporal_excess     (none)              var(column means of temporal residual) / (pixel var / H)
 col_fpn_excess          column_fpn          var(column means of dark mean map) / (map var / H)
@@ -251,8 +251,23 @@ def periodogram(d: CaptureData, axis: int) -> np.ndarray | None:
     return np.concatenate(ps).mean(0)
 
 
+def whitened_periodogram(d: CaptureData, axis: int) -> np.ndarray | None:
+    """Mean over frames of each frame's periodogram divided by its own median (so dark frames,
+    where a weak pattern stands out, are not drowned by the shot noise of flats)."""
+    key = ("wp", axis)
+    if key not in d.cache:
+        lm = _line_means("all", axis, d)
+        if not lm:
+            d.cache[key] = None
+        else:
+            ps = [np.abs(np.fft.rfft(m - m.mean(axis=1, keepdims=True), axis=1)) ** 2 for m in lm]
+            ps = [p / np.median(p[:, 1:], axis=1, keepdims=True) for p in ps]
+            d.cache[key] = np.concatenate(ps).mean(0)
+    return d.cache[key]
+
+
 def _peak(d, axis):
-    p = periodogram(d, axis)
+    p = whitened_periodogram(d, axis)
     if p is None:
         return None
     p = p[1:]

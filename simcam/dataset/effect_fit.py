@@ -82,29 +82,32 @@ def fit_row_noise(d, model, ctx):
 
 
 def fit_periodic(d, model, ctx, axis_name):
+    """Sinusoid in the row (or column) means of the temporal residual: peak of the whitened
+    periodogram, frequency refined to 1/40 bin, amplitude^2 from the per-frame sine/cosine
+    projections minus their noise bias, frames weighted by the inverse square of their noise level."""
     axis = 2 if axis_name == "row" else 1
-    lm = dg._line_means("all", axis, d)
-    L = lm[0].shape[1]
-    p = dg.periodogram(d, axis)
+    lm = np.concatenate(dg._line_means("all", axis, d))  # (frames, L)
+    lm = lm - lm.mean(axis=1, keepdims=True)
+    L = lm.shape[1]
+    p = dg.whitened_periodogram(d, axis)
     k = int(np.argmax(p[1:])) + 1
-    best = (-1.0, k / L)
+    noise = np.median(np.abs(np.fft.rfft(lm, axis=1))[:, 1:] ** 2, axis=1)  # per-frame noise level
+    w_f = 1.0 / noise
     idx = np.arange(L)
+    best = (-1.0, k / L)
     for f in np.linspace((k - 0.5) / L, (k + 0.5) / L, 41):
-        c, s = np.cos(2 * np.pi * f * idx), np.sin(2 * np.pi * f * idx)
-        pw = sum(float(((m @ c) ** 2 + (m @ s) ** 2).sum()) for m in lm)
+        c, s_ = np.cos(2 * np.pi * f * idx), np.sin(2 * np.pi * f * idx)
+        pw = float(np.sum(w_f * ((lm @ c) ** 2 + (lm @ s_) ** 2)))
         if pw > best[0]:
             best = (pw, f)
     f = best[1]
-    c, s = np.cos(2 * np.pi * f * idx), np.sin(2 * np.pi * f * idx)
-    amps, noise = [], []
-    for m in lm:
-        m = m - m.mean(axis=1, keepdims=True)
-        a = 2 / L * (m @ c)
-        b = 2 / L * (m @ s)
-        amps.append(a * a + b * b)
-        fit = a[:, None] * c + b[:, None] * s
-        noise.append(np.var(m - fit, axis=1))
-    A2 = float(np.mean(np.concatenate(amps)) - 4 * np.mean(np.concatenate(noise)) / L)
+    c, s_ = np.cos(2 * np.pi * f * idx), np.sin(2 * np.pi * f * idx)
+    a = 2 / L * (lm @ c)
+    b = 2 / L * (lm @ s_)
+    resid = lm - a[:, None] * c - b[:, None] * s_
+    bias = 4 * np.var(resid, axis=1) / L  # E[a^2 + b^2] = A^2 + 4 sigma^2 / L for white noise sigma^2
+    w = w_f ** 2
+    A2 = float(np.sum(w * (a * a + b * b - bias)) / np.sum(w))
     return {"amplitude_dn": float(np.sqrt(max(A2, 0.0))), "period_px": float(1.0 / f), "axis": axis_name}
 
 
