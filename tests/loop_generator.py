@@ -24,6 +24,8 @@ seed eq. 3.6 for the Poisson-Gaussian core)::
   (``column_fpn``), ``prnu`` N(0, s^2) per pixel, ``hot`` a set of pixels with
   an exponential extra offset (``hot_pixels``).
 * ``flicker`` N(0, s^2) per frame, only where there is light (``frame_flicker``).
+* ``column_noise`` N(0, s^2) per frame and column: deliberately *outside* simcam's effect
+  vocabulary (temporal column noise), to test that the loop reports it as unexplained.
 """
 
 from __future__ import annotations
@@ -152,6 +154,8 @@ class HiddenEffectSensor:
             x = x + s.read_dn * read
             if "row_noise" in eff:
                 x = x + rng.normal(0, eff["row_noise"]["sigma_dn"], (h, 1))
+            if "column_noise" in eff:  # NOT in simcam's vocabulary: tests the 'unexplained' path
+                x = x + rng.normal(0, eff["column_noise"]["sigma_dn"], (1, w))
             if "periodic_pattern" in eff:
                 p = eff["periodic_pattern"]
                 r = np.arange(h)[:, None]

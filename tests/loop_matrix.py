@@ -15,6 +15,11 @@ PAIRS = (
     ("periodic_pattern", "frame_flicker"),
     ("channel_gain", "black_level_offset"),
     ("spatial_correlation", "dsnu"),
+    ("column_fpn", "dsnu"),
+    ("hot_pixels", "heavy_tail_read"),
+    ("row_noise", "periodic_pattern"),
+    ("black_level_offset", "column_fpn"),
+    ("prnu", "channel_gain"),
 )
 CASES = ((),) + tuple((e,) for e in EFFECTS) + PAIRS
 

@@ -121,3 +121,16 @@ def test_scene_only_set_with_clean_reference(tmp_path):
     r = run_loop(cs, LoopConfig(replicates=8, heldout_replicates=4))[0]
     # K from 20 intensity bins of ~50 pixels x 4 frames each: SE ~ 5 % -> 20 % tolerance
     assert r.base.K == pytest.approx(2.0, rel=0.2)
+
+
+def test_effect_outside_the_vocabulary_is_reported_unexplained():
+    # temporal column noise (per frame, per column) is not one of the 13 effects: the loop must
+    # not force it into column_fpn (whose statistic only sees the fixed part) but report it
+    from loop_matrix import in_memory_capture
+    from simcam.dataset.loop import LoopConfig, run_loop
+
+    spec = SensorSpec(effects={"column_noise": {"sigma_dn": 1.5}})
+    r = run_loop(in_memory_capture(capture_set(spec)), LoopConfig())[0]
+    assert list(r.model.effects) == []
+    assert [u["diagnostic"] for u in r.unexplained] == ["col_temporal_excess"]
+    assert r.unexplained[0]["discrepancy"] > 10

@@ -16,7 +16,8 @@ row_mean_excess         row_noise           var(row means of temporal residual) 
 row_spectrum_peak       periodic_pattern    max / median of the (per-frame whitened) periodogram of row means
 col_spectrum_peak       periodic_pattern    same along columns
 col_temporal_excess     (none)              var(column means of temporal residual) / (pixel var / H)
-col_fpn_excess          column_fpn          var(column means of dark mean map) / (map var / H)
+col_fpn_excess          column_fpn          cov(column means of even- and odd-frame dark mean maps) /
+                                            (map var / H)
 dsnu_excess             dsnu                robust var of the dark mean map (rows/cols removed) /
                                             (temporal var / n)
 hot_pixel_tail          hot_pixels          fraction of dark-map pixels > 6 robust sigma
@@ -70,7 +71,8 @@ DIAGNOSTICS = tuple(DIAGNOSTIC_EFFECT)
 PRECEDENCE = {
     "row_mean_excess": ("row_spectrum_peak",),
     "col_temporal_excess": ("col_spectrum_peak",),
-    "dsnu_excess": ("hot_pixel_tail", "col_fpn_excess"),
+    "dsnu_excess": ("hot_pixel_tail",),
+    "col_fpn_excess": ("hot_pixel_tail", "dsnu_excess"),  # per-pixel fixed offsets leak into column means
     "black_offset": ("hot_pixel_tail", "col_fpn_excess", "dsnu_excess"),
     "frame_mean_jitter": ("row_spectrum_peak", "row_mean_excess", "col_spectrum_peak"),
     "plane_gain_spread": ("ptc_curvature",),
@@ -282,14 +284,32 @@ def col_spectrum_peak(d):
     return _peak(d, 1)
 
 
+def column_profiles(d: CaptureData):
+    """Column profiles of the mean maps of the even and of the odd frames (darks, else the
+    longest flat): plane-centred, clipped at 5 robust sigma, row means removed. Their covariance
+    sees only the fixed column pattern (temporal column noise is independent between the halves)."""
+    if "colprof" not in d.cache:
+        stacks = d.darks or ([max(d.flats, key=lambda a: (a.shape[0], float(a.mean())))] if d.flats else [])
+        if not stacks:
+            d.cache["colprof"] = None
+        else:
+            allf = np.concatenate(stacks).astype(np.float64)
+            out = []
+            for half in (allf[0::2], allf[1::2]):
+                m = _clip_robust(plane_centre(half.mean(0)))
+                m = m - m.mean(axis=1, keepdims=True)
+                out.append((m.mean(axis=0), float(np.var(m)), m.shape[0]))
+            d.cache["colprof"] = out
+    return d.cache["colprof"]
+
+
 def col_fpn_excess(d: CaptureData):
-    src = d.dark_map() or d.flat_map()
-    if src is None:
+    prof = column_profiles(d)
+    if prof is None:
         return None
-    m = _clip_robust(plane_centre(src[0]))
-    m = m - m.mean(axis=1, keepdims=True)
-    cols = m.mean(axis=0)
-    return float(np.var(cols) / (np.var(m) / m.shape[0]))
+    (ca, va, h), (cb, vb, _) = prof
+    cov = float(np.mean((ca - ca.mean()) * (cb - cb.mean())))
+    return cov / (0.5 * (va + vb) / h)
 
 
 def dsnu_excess(d: CaptureData):

@@ -112,10 +112,9 @@ def fit_periodic(d, model, ctx, axis_name):
 
 
 def fit_column_fpn(d, model, ctx):
-    src = d.dark_map() or d.flat_map()
-    m = dg._clip_robust(dg.plane_centre(src[0]))
-    m = m - m.mean(axis=1, keepdims=True)
-    s2 = float(np.var(m.mean(axis=0)) - np.var(m) / m.shape[0])
+    """sigma_col^2 = covariance of the column profiles of the even- and odd-frame mean maps."""
+    (ca, _va, _h), (cb, _vb, _) = dg.column_profiles(d)
+    s2 = float(np.mean((ca - ca.mean()) * (cb - cb.mean())))
     return {"sigma_dn": float(np.sqrt(max(s2, 0.0)))}
 
 
