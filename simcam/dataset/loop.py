@@ -323,6 +323,13 @@ def run_loop(capture: CaptureSet, cfg: LoopConfig | None = None,
         notes: list[str] = []
         group = Group(capture.group(iso), cfg, notes)
         start = (start_models or {}).get(iso)
+        if start_models and start is None:
+            notes.append(f"start profile has no entry for ISO {iso}: started from the base fit")
+        if start is not None and (start.cfa != group.cfa or abs(start.white_dn - group.white) > 0.5):
+            from ..errors import ProfileError
+
+            raise ProfileError(f"--start-profile: ISO {iso}: cfa {start.cfa!r} / white level {start.white_dn:g} DN "
+                               f"do not match the capture set ({group.cfa!r} / {group.white:g} DN)")
         res = Loop(group, cfg, iso).run(start)
         res.notes = [n for n in capture.notes if n.startswith(f"ISO {iso}:") or not n.startswith("ISO ")] + notes
         res.plots["group"] = group
