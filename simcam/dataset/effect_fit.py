@@ -77,8 +77,11 @@ def fit_row_noise(d, model, ctx):
     for r in res:
         rm = r.mean(axis=2)
         vals.append(np.var(rm, axis=1).mean() - np.var(r) / r.shape[2])
-    s2 = max(float(np.mean(vals)), 0.0)
-    return {"sigma_dn": float(np.sqrt(s2))}
+    s2 = float(np.mean(vals))
+    per = model.effects.get("periodic_pattern")
+    if per and per.get("axis", "row") == "row":  # a modelled row-wise sinusoid is already part of it
+        s2 -= per["amplitude_dn"] ** 2 / 2
+    return {"sigma_dn": float(np.sqrt(max(s2, 0.0)))}
 
 
 def fit_periodic(d, model, ctx, axis_name):

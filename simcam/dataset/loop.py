@@ -184,6 +184,22 @@ def nll_per_dim(part, specs, model: LoopModel) -> float | None:
     return tot / n
 
 
+def _null_parameters(effect: str, p: dict) -> bool:
+    """True when the fitted effect is the identity (nothing to add)."""
+    keys = {"row_noise": "sigma_dn", "column_fpn": "sigma_dn", "dsnu": "sigma_dn", "prnu": "sigma",
+            "frame_flicker": "sigma", "periodic_pattern": "amplitude_dn", "spatial_correlation": "a",
+            "nonlinearity": "c", "hot_pixels": "fraction"}
+    if effect in keys:
+        return abs(float(p[keys[effect]])) < 1e-9
+    if effect == "quantization":
+        return float(p["step_dn"]) <= 1.0
+    if effect == "black_level_offset":
+        return max(abs(float(x)) for x in p["offset_dn"]) < 1e-9
+    if effect == "channel_gain":
+        return max(abs(float(g) - 1) for g in p["gains"]) < 1e-9
+    return False
+
+
 class Loop:
     """Runs the loop on one ISO group."""
 
@@ -276,7 +292,8 @@ class Loop:
             ha = held_after.get(chosen.name)
             diag_better = (hb is None or ha is None) or abs(ha.z) < abs(hb.z)
             kl_ok = held_after["kl"] <= held_before["kl"] * (1 + cfg.kl_tolerance) + 2 * held_before["kl_floor"]
-            accepted = bool(diag_better and kl_ok)
+            null_fit = _null_parameters(effect, cand.effects[effect])
+            accepted = bool(diag_better and kl_ok and not null_fit)
             rec = {
                 "effect": effect, "parameters": {k: v for k, v in cand.effects[effect].items()},
                 "diagnostic": chosen.name, "discrepancy_before": chosen.z, "discrepancy_after": after.z,
@@ -296,8 +313,9 @@ class Loop:
                 rejected.clear()
             else:
                 rejected.add(chosen.name)
-                res.unexplained.append({"diagnostic": chosen.name, "discrepancy": chosen.z,
-                                        "reason": f"adding {effect} did not reduce the held-out error"})
+                why = (f"the fitted {effect} has zero magnitude" if null_fit else
+                       f"adding {effect} did not reduce the held-out error")
+                res.unexplained.append({"diagnostic": chosen.name, "discrepancy": chosen.z, "reason": why})
         res.model = model
         res.final = discs
         res.heldout_final = {"kl": held_before["kl"], "nll": held_before["nll"], "kl_floor": held_before["kl_floor"]}
