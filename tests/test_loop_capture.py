@@ -63,17 +63,21 @@ def test_no_dark_is_noted(small_set):
 
 
 def test_emva_descriptor_parsing(tmp_path):
-    from PIL import Image
+    import OpenImageIO as oiio
 
     (tmp_path / "images").mkdir()
     for name in ("a1", "a2", "d1", "d2"):
-        Image.fromarray(np.full((4, 6), 100, np.uint16)).save(tmp_path / "images" / f"{name}.png")
+        out = oiio.ImageOutput.create("png")
+        out.open(str(tmp_path / "images" / f"{name}.png"), oiio.ImageSpec(6, 4, 1, oiio.UINT16))
+        out.write_image(np.full((4, 6, 1), 100, np.uint16))
+        out.close()
     desc = tmp_path / "EMVA1288_Data.txt"
     desc.write_text("# comment\nv 3.0\nn 12 6 4\nb 1000.0 50.0\ni images\\a1.png\ni images\\a2.png\n"
                     "d 1000.0\ni images\\d1.png\ni images\\d2.png\n")
     cs = read_emva1288(desc)
     assert [(s.kind, s.n, s.photons) for s in cs.sequences] == [("flat", 2, 50.0), ("dark", 2, 0.0)]
     assert cs.sequences[0].white_dn == 4095 and cs.sequences[0].exposure_s == pytest.approx(1e-6)
+    assert np.all(cs.sequences[0].frames == 100)
     desc.write_text("n 12 6 4\nb 1000.0 50.0\ni images\\a1.png\n")
     with pytest.raises(DatasetError, match="has 1 image"):
         read_emva1288(desc)

@@ -313,15 +313,24 @@ def read_emva1288(descriptor: str | Path) -> CaptureSet:
 
 
 def _read_png(path: Path, shape: tuple[int, int]) -> np.ndarray:
-    from PIL import Image
+    """One monochrome image (PNG / TIFF) through OpenImageIO, stored values unscaled."""
+    import OpenImageIO as oiio
 
+    if not path.exists():
+        raise DatasetError(f"{path}: image listed in the descriptor not found")
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise DatasetError(f"{path}: cannot read image ({oiio.geterror()})")
     try:
-        with Image.open(path) as im:
-            arr = np.array(im)
-    except FileNotFoundError:
-        raise DatasetError(f"{path}: image listed in the descriptor not found") from None
-    except Exception as exc:
-        raise DatasetError(f"{path}: cannot read image ({exc})") from None
+        spec = inp.spec()
+        arr = inp.read_image(0, 0, 0, 1, spec.format)
+    finally:
+        inp.close()
+    if arr is None:
+        raise DatasetError(f"{path}: cannot decode image pixels")
+    arr = np.asarray(arr)[..., 0] if np.ndim(arr) == 3 else np.asarray(arr)
+    if spec.nchannels != 1:
+        raise DatasetError(f"{path}: {spec.nchannels} channels; expected a monochrome image")
     if arr.shape != shape:
         raise DatasetError(f"{path}: image size {arr.shape[1]}x{arr.shape[0]}; expected {shape[1]}x{shape[0]} "
                            "from the descriptor's 'n' line")

@@ -189,8 +189,9 @@ def _ptc_curve(model: LoopModel, y: np.ndarray, plane: int) -> np.ndarray:
 
 def figures(r: GroupResult, seed: int = 0) -> dict[str, str]:
     """Base64 PNGs: photon transfer, spectra, temporal-mean maps, residual histograms."""
-    import matplotlib
+    from ..errors import require_extra
 
+    matplotlib = require_extra("matplotlib", "plot")
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
