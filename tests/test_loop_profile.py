@@ -36,9 +36,10 @@ def test_round_trip_through_noise_profile():
     assert back.effects["dsnu"]["sigma_dn"] == pytest.approx(2.0)
     assert back.effects["spatial_correlation"]["a"] == pytest.approx(0.2, rel=1e-6)
     assert back.effects["nonlinearity"]["c"] == pytest.approx(-0.1)
-    # beta1 on normalised raw = K / (white - black)
+    assert back.effects["channel_gain"]["gains"] == pytest.approx([1.1, 1.0, 1.0, 0.9])
+    # beta1 on normalised raw = K g_c / (white - black), per site
     entry, _ = noise_entry(m)
-    assert entry["base"]["beta1"] == pytest.approx(2.0 / 959.0)
+    assert entry["base"]["beta1"] == pytest.approx([2.2 / 959.0, 2.0 / 959.0, 2.0 / 959.0, 1.8 / 959.0])
 
 
 def test_profile_is_accepted_by_the_noise_stage():

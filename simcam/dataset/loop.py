@@ -52,6 +52,7 @@ class LoopConfig:
     max_iterations: int = 10
     seed: int = 0
     max_size: int = 128  # centre crop (pixels per side) used by the loop
+    backend: str = "internal"  # simulator: "internal" or "simcam" (simcam.noise composite)
     kl_tolerance: float = 0.10  # relative growth of held-out KL still accepted (plus twice its sampling floor)
 
 
@@ -218,7 +219,7 @@ class Loop:
         specs = self.g.specs(model, self.g.fit)
         sim_stats = []
         for r in range(self.cfg.replicates):
-            sims = simulate_capture(model, specs, self._rng(1, tag, r))
+            sims = simulate_capture(model, specs, self._rng(1, tag, r), self.cfg.backend)
             sim_stats.append(dg.compute_all(_capture(self.g, self.g.fit, sims, specs), self.applicable))
         discs = []
         for name in self.applicable:
@@ -231,7 +232,7 @@ class Loop:
         real = noise_values(self.g.held, [f for _, f, _ in self.g.held], specs, model)
         sim_noise, sim_stats = [], []
         for r in range(self.cfg.heldout_replicates):
-            sims = simulate_capture(model, specs, self._rng(2, tag, r))
+            sims = simulate_capture(model, specs, self._rng(2, tag, r), self.cfg.backend)
             sim_noise.append(noise_values(self.g.held, sims, specs, model))
             if diagnostics:
                 sim_stats.append(dg.compute_all(_capture(self.g, self.g.held, sims, specs), diagnostics))
@@ -278,6 +279,7 @@ class Loop:
                 continue
             tag += 1
             ctx = {"value": chosen.value, "sim_mean": chosen.sim_mean, "seed": cfg.seed * 1000 + tag,
+                   "backend": cfg.backend,
                    "dark_specs": [sp for sp in self.g.specs(model, self.g.fit) if sp.kind == "dark"]}
             if effect in ("heavy_tail_read", "spatial_correlation") and not ctx["dark_specs"]:
                 excluded.add(chosen.name)
@@ -351,5 +353,6 @@ def run_loop(capture: CaptureSet, cfg: LoopConfig | None = None,
         res = Loop(group, cfg, iso).run(start)
         res.notes = [n for n in capture.notes if n.startswith(f"ISO {iso}:") or not n.startswith("ISO ")] + notes
         res.plots["group"] = group
+        res.plots["backend"] = cfg.backend
         out.append(res)
     return out

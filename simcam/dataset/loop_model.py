@@ -212,8 +212,18 @@ def simulate(model: LoopModel, spec: SimSpec, rng, sensor: dict) -> np.ndarray:
     return np.clip(np.round(v / q) * q, 0, model.white_dn).astype(np.float32)
 
 
-def simulate_capture(model: LoopModel, specs: list[SimSpec], rng) -> list[np.ndarray]:
+#: Which simulator the loop uses: "internal" (this module) or "simcam" (simcam.noise composite,
+#: :mod:`simcam.dataset.loop_backend`).
+BACKENDS = ("internal", "simcam")
+
+
+def simulate_capture(model: LoopModel, specs: list[SimSpec], rng, backend: str = "internal") -> list[np.ndarray]:
     """One simulated sensor, all sequences of ``specs`` (same geometry)."""
+    if backend == "simcam":
+        from .loop_backend import simulate_simcam
+
+        sensor = {"seed": int(rng.integers(0, 2**31))}
+        return [simulate_simcam(model, sp, rng, sensor) for sp in specs]
     sensor = draw_sensor(model, specs[0].signal_dn.shape, rng)
     return [simulate(model, sp, rng, sensor) for sp in specs]
 

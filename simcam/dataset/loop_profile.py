@@ -17,6 +17,9 @@ Conversions that are approximations (stated in the profile's provenance notes):
 * ``hot_pixels``: log-normal offsets become one offset, their mean.
 * ``nonlinearity``: ``strength = -c`` (compressive only); the noise stage applies it to the
   expected signal, the loop to signal plus noise.
+* ``channel_gain``: the loop's per-site gain acts after photon counting (it changes the
+  variance-to-mean ratio), so it is written as per-site ``beta1`` of the base, not as the noise
+  stage's ``channel_gain`` effect (which scales the expected signal, i.e. a QE difference).
 """
 
 from __future__ import annotations
@@ -53,8 +56,8 @@ def noise_entry(model: LoopModel) -> tuple[dict, list[str]]:
         p = e[name]
         if name == "prnu":
             effects.append({"type": "prnu", "sigma": float(p["sigma"])})
-        elif name == "channel_gain":
-            effects.append({"type": "channel_gain", "gain": [float(x) for x in p["gains"]]})
+        elif name == "channel_gain":  # a gain after photon counting: per-site beta1 (var / mean changes)
+            beta1 = [float(model.K * g / fs) for g in p["gains"]]
         elif name == "frame_flicker":
             effects.append({"type": "frame_flicker", "sigma": float(p["sigma"])})
         elif name == "nonlinearity":
@@ -144,9 +147,12 @@ def models_from_noise_profile(doc: dict, where: str) -> dict[int, LoopModel]:
         if base.get("type") not in ("poisson_gaussian", "nlf"):
             raise ProfileError(f"{where}: cameras[0].entries[{i}].model: type {base.get('type')!r}; expected "
                                "poisson_gaussian or nlf (or a composite of one)")
-        b1 = float(np.mean(base["beta1"]))
+        b1_sites = np.broadcast_to(np.asarray(base["beta1"], dtype=np.float64), (4,))
+        b1 = float(np.mean(b1_sites))
         b2 = float(np.mean(base["beta2"]))
         effects: dict = {}
+        if np.ptp(b1_sites) > 0:
+            effects["channel_gain"] = {"gains": [float(x) for x in b1_sites / b1]}
         read = np.sqrt(b2) * fs
         for eff in m.get("effects", []) if m.get("type") == "composite" else []:
             t = eff["type"]
