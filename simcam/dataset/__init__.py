@@ -1,1 +1,2 @@
-"""Datasets and evaluation: denoiser benchmark, noise estimation, on-the-fly training data."""
+"""Dataset tools: capture sets, photon transfer, the calibration loop; denoiser benchmark,
+noise estimation and on-the-fly training data."""
