@@ -190,7 +190,8 @@ def main() -> None:
     gt = np.stack([np.stack([g] * f.shape[0]) for f, g in test])
     rows = {}
     denoisers = {"noisy input": "none", "BM3D (estimated NLF, VST)": "bm3d"}
-    denoisers.update({f"DnCNN-{a}": DnCNNDenoiser(m, name=f"DnCNN-{a}") for a, m in models.items()})
+    denoisers.update({f"DnCNN-{a} ({train_info[a]['steps']} steps)": DnCNNDenoiser(m, name=f"DnCNN-{a}")
+                      for a, m in models.items()})
     for label, den in denoisers.items():
         r = run_benchmark(noisy, gt, den, cfa="RGGB")
         rows[label] = {"psnr": r.raw["psnr"], "ssim": r.raw["ssim"], "s_per_mp": r.seconds_per_mp}
@@ -206,7 +207,7 @@ def main() -> None:
     syn = np.stack(syn)[:, None].astype(np.float32)
     rows_syn = {}
     for label, den in denoisers.items():
-        if label.startswith("DnCNN") and label not in ("DnCNN-nlf", "DnCNN-real"):
+        if label.startswith("DnCNN") and not label.startswith(("DnCNN-nlf", "DnCNN-real")):
             continue
         r = run_benchmark(syn, gts, den, cfa="RGGB")
         rows_syn[label] = {"psnr": r.raw["psnr"], "ssim": r.raw["ssim"], "s_per_mp": r.seconds_per_mp}
@@ -232,7 +233,7 @@ def plot(rows: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     labels = list(rows)
-    fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
+    fig, ax = plt.subplots(1, 2, figsize=(11, 3.8))
     for a, key, unit in ((ax[0], "psnr", "PSNR (dB)"), (ax[1], "ssim", "SSIM")):
         vals = [rows[k][key] for k in labels]
         a.barh(labels, vals, color=["#999"] + ["#4a7"] + ["#47a"] * (len(labels) - 2))
