@@ -1,0 +1,377 @@
+"""Render benchmark: a 12 MP DNG -> 8-bit sRGB, simcam against rawpy (LibRaw).
+
+Writes a synthetic 4000 x 3000 RGGB DNG (a lit colour chart, colour ramps and a
+zone plate, with shot and read noise) with simcam's DNG writer, then times the
+whole render DNG -> sRGB 8-bit:
+
+* simcam: ``read_dng`` + the built-in ``srgb`` pipeline with ``demosaic.method``
+  ``bilinear`` and ``malvar2004`` + conversion to uint8;
+* rawpy: ``rawpy.imread`` + ``postprocess(demosaic_algorithm=LINEAR | AHD,
+  use_camera_wb=True, output_bps=8, no_auto_bright=True, gamma=(2.4, 12.92))``.
+
+Runs are interleaved (each round runs every configuration once) and the median
+of ``--runs`` rounds is reported, with MP/s and the ratio to rawpy AHD measured
+in the same run. A second table breaks the simcam render into its steps.
+
+Threads: numpy runs its element-wise kernels on one thread; LibRaw uses OpenMP
+(``OMP_NUM_THREADS``, default: all cores). Set ``OMP_NUM_THREADS`` (and
+``OPENBLAS_NUM_THREADS``) in the environment to change them; both are printed.
+
+Usage::
+
+    python benchmarks/render.py                # 4000x3000, 5 rounds
+    python benchmarks/render.py --quick        # 1000x750, 3 rounds (smoke test)
+    python benchmarks/render.py --size 3000x4000 --runs 7
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+if __package__ in (None, ""):  # run as a script: make the repository importable
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from simcam.frame import CameraMeta, RawFrame  # noqa: E402
+
+#: Canon EOS 550D ColorMatrix (XYZ D65 -> camera), dcraw/Adobe ``adobe_coeff`` / 10000.
+COLOR_MATRIX_D65 = np.array([[0.6941, -0.1164, -0.0857], [-0.3825, 1.1597, 0.2534], [-0.0416, 0.1540, 0.6039]])
+BLACK_DN, WHITE_DN = 512.0, 16383.0
+AS_SHOT_NEUTRAL = np.array([0.47, 1.0, 0.68])  # camera response to white (G = 1)
+DEMOSAIC_METHODS = ("bilinear", "malvar2004")
+RAWPY_ALGOS = ("LINEAR", "AHD")
+
+
+# -- synthetic capture ---------------------------------------------------------------------
+def synthetic_scene(h: int, w: int, seed: int = 0) -> np.ndarray:
+    """Linear camera-RGB radiance (H x W x 3 float32, white = AS_SHOT_NEUTRAL at 1.0).
+
+    Left: a 6 x 4 chart of flat patches under a smooth vignette; right: colour
+    ramps; bottom-right quarter: a zone plate (fine detail for the demosaicers).
+    """
+    rng = np.random.default_rng(seed)
+    y = np.linspace(-1.0, 1.0, h, dtype=np.float32)[:, None]
+    x = np.linspace(-1.0, 1.0, w, dtype=np.float32)[None, :]
+    light = 0.75 * (1.0 - 0.25 * (x * x + y * y))  # smooth fall-off
+    patches = rng.uniform(0.03, 0.9, size=(4, 6, 3)).astype(np.float32)
+    rows = np.minimum((np.arange(h) * 4) // h, 3)
+    cols = np.minimum((np.arange(w) * 6) // w, 5)
+    refl = patches[rows][:, cols]  # H x W x 3
+    xr = (x + 1.0) / 2.0
+    yr = (y + 1.0) / 2.0
+    right = np.broadcast_to(xr > 0.5, (h, w))
+    ramp = np.stack(np.broadcast_arrays(np.float32(0.9) * xr, yr * np.float32(0.8) + 0.05, 1.0 - xr * yr), axis=-1)
+    refl = np.where(right[..., None], ramp, refl)
+    zone = (xr > 0.5) & (yr > 0.5)
+    r2 = ((x - 0.5) ** 2 + (y - 0.5) ** 2) * np.float32(min(h, w) * 0.8)
+    zp = np.float32(0.5) + np.float32(0.4) * np.cos(r2)
+    refl = np.where(zone[..., None], zp[..., None] * np.float32([0.9, 0.85, 0.8]), refl)
+    return (refl * light[..., None] * AS_SHOT_NEUTRAL.astype(np.float32)).astype(np.float32)
+
+
+def synthetic_frame(h: int, w: int, cfa: str = "RGGB", seed: int = 0) -> RawFrame:
+    """A ``raw_dn`` frame of :func:`synthetic_scene` through the CFA, with shot + read noise."""
+    from simcam.cfa import channel_masks
+
+    rgb = synthetic_scene(h, w, seed)
+    masks = channel_masks(cfa, (h, w))
+    mosaic = np.zeros((h, w), np.float32)
+    for i, c in enumerate("RGB"):
+        mosaic[masks[c]] = rgb[..., i][masks[c]]
+    rng = np.random.default_rng(seed + 1)
+    scale = WHITE_DN - BLACK_DN
+    full_well_e = 20000.0
+    electrons = rng.poisson(np.clip(mosaic, 0, None) * full_well_e).astype(np.float32)
+    dn = BLACK_DN + electrons / np.float32(full_well_e) * np.float32(scale)
+    dn += rng.standard_normal((h, w), dtype=np.float32) * np.float32(2.0)
+    dn = np.clip(np.round(dn), 0, WHITE_DN).astype(np.float32)
+    meta = CameraMeta(
+        make="simcam", model="synthetic", unique_camera_model="simcam synthetic", cfa=cfa,
+        black_level=np.full((1, 1), BLACK_DN), white_level=WHITE_DN,
+        as_shot_neutral=AS_SHOT_NEUTRAL.copy(), color_matrix1=COLOR_MATRIX_D65.copy(),
+        calibration_illuminant1=21, iso=100.0, exposure_time_s=0.01,
+    )
+    return RawFrame(dn, meta, kind="raw_dn")
+
+
+def write_synthetic_dng(path: str | Path, h: int, w: int, seed: int = 0) -> Path:
+    """Write the synthetic capture as an uncompressed 16-bit DNG with simcam's writer."""
+    frame = synthetic_frame(h, w, seed=seed)
+    try:
+        from simcam.io.dng_write import write_dng
+    except ImportError:  # DNG writer not merged yet: stand-in below
+        return _standin_write_dng(Path(path), frame)
+    return Path(write_dng(path, frame))
+
+
+# -- renders ---------------------------------------------------------------------------------
+def simcam_pipeline(method: str):
+    """The built-in ``srgb`` pipeline with ``demosaic.method`` set."""
+    from simcam.pipeline import Pipeline, builtin_pipelines
+
+    if "srgb" not in builtin_pipelines():  # colour stages not merged yet: stand-ins below
+        return _StandinPipeline(method)
+    return Pipeline.from_yaml("srgb").with_overrides({"demosaic.method": method})
+
+
+def simcam_render(path: Path, pipe, *, steps: dict[str, float] | None = None) -> np.ndarray:
+    """DNG -> uint8 sRGB through simcam; optionally accumulate per-step seconds in ``steps``."""
+    from simcam.io.images import to_samples
+
+    try:
+        from simcam.io.dng import read_dng
+    except ImportError:  # DNG reader not merged yet
+        read_dng = _standin_read_dng
+
+    t0 = time.perf_counter()
+    frame = read_dng(path)
+    t1 = time.perf_counter()
+    _add(steps, "read_dng", t1 - t0)
+    for stage in pipe.stages:
+        t0 = time.perf_counter()
+        frame = stage(frame)
+        _add(steps, stage.type, time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    out = to_samples(frame.data, "uint8")
+    _add(steps, "to_uint8", time.perf_counter() - t0)
+    return out
+
+
+def _add(steps, key, dt):
+    if steps is not None:
+        steps.setdefault(key, []).append(dt)
+
+
+def rawpy_render(path: Path, algo: str) -> np.ndarray:
+    """DNG -> uint8 sRGB through LibRaw (camera white balance, no auto-brightening, sRGB curve)."""
+    import rawpy
+
+    with rawpy.imread(str(path)) as raw:
+        return raw.postprocess(
+            demosaic_algorithm=getattr(rawpy.DemosaicAlgorithm, algo), use_camera_wb=True,
+            output_bps=8, no_auto_bright=True, gamma=(2.4, 12.92), output_color=rawpy.ColorSpace.sRGB,
+        )
+
+
+# -- stand-ins used only until the DNG reader/writer and the colour stages are on main --------
+def _standin_write_dng(path: Path, frame: RawFrame) -> Path:
+    """Minimal uncompressed CFA DNG 1.4 with tifffile (the tags LibRaw needs)."""
+    import tifffile
+
+    def rat(vals, den=1_000_000):
+        return tuple(v for x in vals for v in (int(round(float(x) * den)), den))
+
+    m = frame.meta
+    tags = [
+        (271, 2, 0, m.make, True), (272, 2, 0, m.model, True),
+        (33421, 3, 2, (2, 2), True), (33422, 1, 4, tuple("RGB".index(c) for c in m.cfa), True),
+        (50706, 1, 4, (1, 4, 0, 0), True), (50707, 1, 4, (1, 1, 0, 0), True),
+        (50708, 2, 0, m.unique_camera_model, True),
+        (50714, 5, 1, rat([float(m.black_level.ravel()[0])]), True), (50717, 4, 1, (int(m.white_level),), True),
+        (50721, 10, 9, rat(m.color_matrix1.ravel()), True), (50778, 3, 1, (21,), True),
+        (50728, 5, 3, rat(m.as_shot_neutral), True),
+    ]
+    tifffile.imwrite(path, frame.data.astype(np.uint16), photometric=32803, extratags=tags, subfiletype=0)
+    return path
+
+
+def _standin_read_dng(path: Path) -> RawFrame:
+    """Pixels through rawpy, tags through tifffile (only those the stand-in writer sets)."""
+    import rawpy
+    import tifffile
+
+    with rawpy.imread(str(path)) as raw:
+        data = np.array(raw.raw_image, dtype=np.float32, copy=True)
+    with tifffile.TiffFile(path) as tif:
+        t = {tag.code: tag.value for tag in tif.pages[0].tags.values()}
+    num = lambda v: np.asarray(v, dtype=np.float64).reshape(-1, 2)  # noqa: E731
+    ratv = lambda v: num(v)[:, 0] / num(v)[:, 1]  # noqa: E731
+    meta = CameraMeta(
+        make=t[271], model=t[272], cfa="".join("RGB"[i] for i in t[33422]),
+        black_level=ratv(t[50714]).reshape(1, 1), white_level=float(t[50717]),
+        color_matrix1=ratv(t[50721]).reshape(3, 3), calibration_illuminant1=int(t[50778]),
+        as_shot_neutral=ratv(t[50728]), source=str(path),
+    )
+    return RawFrame(data, meta, kind="raw_dn")
+
+
+class _StandinStep:
+    """A timed render step that is not (yet) a registered stage."""
+
+    def __init__(self, type_: str, fn):
+        self.type, self.fn = type_, fn
+
+    def __call__(self, frame: RawFrame) -> RawFrame:
+        return self.fn(frame)
+
+
+def _standin_white_balance(frame: RawFrame) -> RawFrame:
+    """Mosaic x 1/AsShotNeutral per CFA site (G = 1)."""
+    gains = (1.0 / np.asarray(frame.meta.as_shot_neutral, np.float64)).astype(np.float32)
+    cell = np.array([gains["RGB".index(c)] for c in frame.meta.cfa], np.float32).reshape(1, 2, 1, 2)
+    h, w = frame.data.shape
+    out = (frame.data.reshape(h // 2, 2, w // 2, 2) * cell).reshape(h, w)
+    return frame.evolve(out, step="white_balance")
+
+
+def _standin_camera_to_srgb(frame: RawFrame) -> RawFrame:
+    """White-balanced camera RGB -> linear sRGB: dcraw's rgb_cam from ColorMatrix1 (D65),
+    rows of camera-from-sRGB normalised so that white stays white."""
+    xyz_to_srgb = np.array([[3.2404542, -1.5371385, -0.4985314], [-0.9692660, 1.8760108, 0.0415560],
+                            [0.0556434, -0.2040259, 1.0572252]])
+    cam_from_srgb = np.asarray(frame.meta.color_matrix1) @ np.linalg.inv(xyz_to_srgb)
+    cam_from_srgb /= cam_from_srgb.sum(axis=1, keepdims=True)
+    m = np.linalg.inv(cam_from_srgb).astype(np.float32)
+    out = frame.data @ m.T
+    return frame.evolve(out, kind="linear_srgb", step="camera_to_srgb")
+
+
+def _standin_srgb_encode(frame: RawFrame) -> RawFrame:
+    """Clip to [0, 1] and apply the sRGB OETF (IEC 61966-2-1)."""
+    x = np.clip(frame.data, 0.0, 1.0)
+    out = np.where(x <= 0.0031308, x * np.float32(12.92), np.float32(1.055) * np.power(x, np.float32(1 / 2.4)) - np.float32(0.055))
+    return frame.evolve(out.astype(np.float32), kind="display", step="srgb_encode")
+
+
+class _StandinPipeline:
+    """normalize, crop, white balance, demosaic, camera -> sRGB, sRGB encode (stand-in steps)."""
+
+    standin = True
+
+    def __init__(self, method: str):
+        from simcam.stages.demosaic import Demosaic
+        from simcam.stages.raw import Crop, Normalize
+
+        self.stages = [Normalize(), Crop(), _StandinStep("white_balance*", _standin_white_balance),
+                       Demosaic(method=method), _StandinStep("camera_to_srgb*", _standin_camera_to_srgb),
+                       _StandinStep("srgb_encode*", _standin_srgb_encode)]
+
+
+# -- benchmark -------------------------------------------------------------------------------
+def run_benchmark(h: int, w: int, runs: int, *, workdir: str | Path | None = None, save: str | Path | None = None,
+                  out=print) -> dict:
+    """Time every configuration ``runs`` times (interleaved) and print the tables.
+
+    Returns a dict with ``"results"`` (label -> list of seconds), ``"steps"``
+    (method -> step -> list of seconds) and ``"mean_abs_diff"`` (label -> mean
+    absolute 8-bit difference to rawpy AHD, a sanity check of the render).
+    """
+    with tempfile.TemporaryDirectory(dir=workdir) as tmp:
+        path = Path(tmp) / "synthetic.dng"
+        t0 = time.perf_counter()
+        write_synthetic_dng(path, h, w)
+        out(f"wrote {w}x{h} synthetic DNG ({path.stat().st_size / 1e6:.1f} MB) in {time.perf_counter() - t0:.2f} s")
+        pipes = {m: simcam_pipeline(m) for m in DEMOSAIC_METHODS}
+        results: dict[str, list[float]] = {}
+        steps: dict[str, dict[str, list[float]]] = {m: {} for m in DEMOSAIC_METHODS}
+        images: dict[str, np.ndarray] = {}
+        for r in range(runs + 1):  # round 0 warms caches and imports; not counted
+            for m in DEMOSAIC_METHODS:
+                st: dict[str, list[float]] = {}
+                t0 = time.perf_counter()
+                img = simcam_render(path, pipes[m], steps=st)
+                dt = time.perf_counter() - t0
+                if r:
+                    results.setdefault(f"simcam {m}", []).append(dt)
+                    for k, v in st.items():
+                        steps[m].setdefault(k, []).extend(v)
+                images[f"simcam {m}"] = img
+            for a in RAWPY_ALGOS:
+                t0 = time.perf_counter()
+                img = rawpy_render(path, a)
+                dt = time.perf_counter() - t0
+                if r:
+                    results.setdefault(f"rawpy {a}", []).append(dt)
+                images[f"rawpy {a}"] = img
+    if save is not None:
+        from simcam.io.images import write_image
+
+        for k, img in images.items():
+            write_image(Path(save) / (k.replace(" ", "_") + ".png"), img.astype(np.float32) / 255.0)
+    ref = images["rawpy AHD"].astype(np.float32)
+    diffs = {}
+    for k, img in images.items():
+        if img.shape != ref.shape:
+            raise RuntimeError(f"{k}: output shape {img.shape} differs from rawpy's {ref.shape}")
+        b = 8  # ignore borders, where demosaicers legitimately differ
+        diffs[k] = float(np.mean(np.abs(img[b:-b, b:-b].astype(np.float32) - ref[b:-b, b:-b])))
+    print_tables(h, w, runs, results, steps, diffs, out=out)
+    return {"results": results, "steps": steps, "mean_abs_diff": diffs}
+
+
+def print_tables(h, w, runs, results, steps, diffs, *, out=print) -> None:
+    mp = h * w / 1e6
+    ahd = float(np.median(results["rawpy AHD"]))
+    out("")
+    out(f"### Render DNG -> sRGB 8-bit, {w}x{h} ({mp:.1f} MP), median of {runs} runs")
+    out("")
+    out(f"{_thread_line()}")
+    out("")
+    out("| render | median s | min s | MP/s (median) | ratio to rawpy AHD | mean abs diff to AHD (8-bit levels) |")
+    out("|---|---:|---:|---:|---:|---:|")
+    for k in [f"simcam {m}" for m in DEMOSAIC_METHODS] + [f"rawpy {a}" for a in RAWPY_ALGOS]:
+        med = float(np.median(results[k]))
+        out(f"| {k} | {med:.3f} | {min(results[k]):.3f} | {mp / med:.1f} | {med / ahd:.2f} | {diffs[k]:.2f} |")
+    out("")
+    out(f"### simcam render steps, median seconds of {runs} runs")
+    out("")
+    keys = list(next(iter(steps.values())).keys())
+    out("| step | " + " | ".join(DEMOSAIC_METHODS) + " |")
+    out("|---|" + "---:|" * len(DEMOSAIC_METHODS))
+    for k in keys:
+        out(f"| {k} | " + " | ".join(f"{np.median(steps[m][k]):.3f}" for m in DEMOSAIC_METHODS) + " |")
+    out("| **sum of steps** | " + " | ".join(
+        f"{sum(np.median(v) for v in steps[m].values()):.3f}" for m in DEMOSAIC_METHODS) + " |")
+    if any(k.endswith("*") for k in keys):
+        out("")
+        out("(*) stand-in step written in this script until the colour stages are merged.")
+
+
+def _thread_line() -> str:
+    omp = os.environ.get("OMP_NUM_THREADS", f"unset (LibRaw OpenMP uses all {os.cpu_count()} cores)")
+    blas = os.environ.get("OPENBLAS_NUM_THREADS", "unset")
+    return (f"Threads: numpy element-wise kernels single-threaded; OMP_NUM_THREADS={omp}; "
+            f"OPENBLAS_NUM_THREADS={blas}. Machine: {platform.processor() or platform.machine()}, "
+            f"{os.cpu_count()} cores; numpy {np.__version__}, rawpy {_rawpy_version()}.")
+
+
+def _rawpy_version() -> str:
+    import rawpy
+
+    return f"{rawpy.__version__} (LibRaw {rawpy.libraw_version})"
+
+
+def _parse_size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--size: expected WIDTHxHEIGHT like 4000x3000, got {text!r}") from None
+    if w < 64 or h < 64:
+        raise argparse.ArgumentTypeError(f"--size: expected at least 64x64, got {text!r}")
+    return h, w
+
+
+def main(argv: list[str] | None = None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--size", type=_parse_size, default=None, help="WIDTHxHEIGHT (default 4000x3000)")
+    ap.add_argument("--runs", type=int, default=None, help="timed rounds (default 5; 3 with --quick)")
+    ap.add_argument("--quick", action="store_true", help="smoke test: 1000x750, 3 rounds")
+    ap.add_argument("--workdir", default=None, help="folder for the temporary DNG (default: system temp)")
+    ap.add_argument("--save", default=None, help="folder to write the four renders as PNG (for a look)")
+    args = ap.parse_args(argv)
+    h, w = args.size or ((750, 1000) if args.quick else (3000, 4000))
+    runs = args.runs or (3 if args.quick else 5)
+    if runs < 1:
+        ap.error(f"--runs: expected at least 1, got {runs}")
+    return run_benchmark(h, w, runs, workdir=args.workdir, save=args.save)
+
+
+if __name__ == "__main__":
+    main()
