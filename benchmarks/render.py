@@ -14,8 +14,9 @@ of ``--runs`` rounds is reported, with MP/s and the ratio to rawpy AHD measured
 in the same run. A second table breaks the simcam render into its steps.
 
 Threads: numpy runs its element-wise kernels on one thread; LibRaw uses OpenMP
-(``OMP_NUM_THREADS``, default: all cores). Set ``OMP_NUM_THREADS`` (and
-``OPENBLAS_NUM_THREADS``) in the environment to change them; both are printed.
+(``OMP_NUM_THREADS``, default: all cores). Set ``OMP_NUM_THREADS`` (or
+``--omp-threads N``) and ``OPENBLAS_NUM_THREADS`` in the environment to change
+them; both are printed.
 
 Usage::
 
@@ -365,7 +366,13 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--quick", action="store_true", help="smoke test: 1000x750, 3 rounds")
     ap.add_argument("--workdir", default=None, help="folder for the temporary DNG (default: system temp)")
     ap.add_argument("--save", default=None, help="folder to write the four renders as PNG (for a look)")
+    ap.add_argument("--omp-threads", type=int, default=None,
+                    help="set OMP_NUM_THREADS for LibRaw (must happen before rawpy is imported)")
     args = ap.parse_args(argv)
+    if args.omp_threads is not None:
+        if "rawpy" in sys.modules:
+            ap.error("--omp-threads: rawpy is already imported in this process; set OMP_NUM_THREADS instead")
+        os.environ["OMP_NUM_THREADS"] = str(args.omp_threads)
     h, w = args.size or ((750, 1000) if args.quick else (3000, 4000))
     runs = args.runs or (3 if args.quick else 5)
     if runs < 1:
