@@ -236,9 +236,13 @@ def _standin_camera_to_srgb(frame: RawFrame) -> RawFrame:
 
 def _standin_srgb_encode(frame: RawFrame) -> RawFrame:
     """Clip to [0, 1] and apply the sRGB OETF (IEC 61966-2-1)."""
-    x = np.clip(frame.data, 0.0, 1.0)
-    out = np.where(x <= 0.0031308, x * np.float32(12.92), np.float32(1.055) * np.power(x, np.float32(1 / 2.4)) - np.float32(0.055))
-    return frame.evolve(out.astype(np.float32), kind="display", step="srgb_encode")
+    y = np.clip(frame.data, 0.0, 1.0)
+    lin = y * np.float32(12.92)
+    np.power(y, np.float32(1 / 2.4), out=y)
+    y *= np.float32(1.055)
+    y -= np.float32(0.055)
+    np.copyto(y, lin, where=lin <= np.float32(0.0031308 * 12.92))
+    return frame.evolve(y, kind="display", step="srgb_encode")
 
 
 class _StandinPipeline:
@@ -260,9 +264,10 @@ def run_benchmark(h: int, w: int, runs: int, *, workdir: str | Path | None = Non
                   out=print) -> dict:
     """Time every configuration ``runs`` times (interleaved) and print the tables.
 
-    Returns a dict with ``"results"`` (label -> list of seconds), ``"steps"``
-    (method -> step -> list of seconds) and ``"mean_abs_diff"`` (label -> mean
-    absolute 8-bit difference to rawpy AHD, a sanity check of the render).
+    Returns a dict with ``"results"`` (label -> list of wall seconds), ``"cpu"``
+    (label -> list of process CPU seconds, all threads), ``"steps"`` (method ->
+    step -> list of seconds) and ``"mean_abs_diff"`` (label -> mean absolute 8-bit
+    difference to rawpy AHD, a sanity check of the render).
     """
     with tempfile.TemporaryDirectory(dir=workdir) as tmp:
         path = Path(tmp) / "synthetic.dng"
@@ -271,25 +276,28 @@ def run_benchmark(h: int, w: int, runs: int, *, workdir: str | Path | None = Non
         out(f"wrote {w}x{h} synthetic DNG ({path.stat().st_size / 1e6:.1f} MB) in {time.perf_counter() - t0:.2f} s")
         pipes = {m: simcam_pipeline(m) for m in DEMOSAIC_METHODS}
         results: dict[str, list[float]] = {}
+        cpu: dict[str, list[float]] = {}
         steps: dict[str, dict[str, list[float]]] = {m: {} for m in DEMOSAIC_METHODS}
         images: dict[str, np.ndarray] = {}
         for r in range(runs + 1):  # round 0 warms caches and imports; not counted
             for m in DEMOSAIC_METHODS:
                 st: dict[str, list[float]] = {}
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.process_time()
                 img = simcam_render(path, pipes[m], steps=st)
-                dt = time.perf_counter() - t0
+                dt, dc = time.perf_counter() - t0, time.process_time() - c0
                 if r:
                     results.setdefault(f"simcam {m}", []).append(dt)
+                    cpu.setdefault(f"simcam {m}", []).append(dc)
                     for k, v in st.items():
                         steps[m].setdefault(k, []).extend(v)
                 images[f"simcam {m}"] = img
             for a in RAWPY_ALGOS:
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.process_time()
                 img = rawpy_render(path, a)
-                dt = time.perf_counter() - t0
+                dt, dc = time.perf_counter() - t0, time.process_time() - c0
                 if r:
                     results.setdefault(f"rawpy {a}", []).append(dt)
+                    cpu.setdefault(f"rawpy {a}", []).append(dc)
                 images[f"rawpy {a}"] = img
     if save is not None:
         from simcam.io.images import write_image
@@ -303,11 +311,11 @@ def run_benchmark(h: int, w: int, runs: int, *, workdir: str | Path | None = Non
             raise RuntimeError(f"{k}: output shape {img.shape} differs from rawpy's {ref.shape}")
         b = 8  # ignore borders, where demosaicers legitimately differ
         diffs[k] = float(np.mean(np.abs(img[b:-b, b:-b].astype(np.float32) - ref[b:-b, b:-b])))
-    print_tables(h, w, runs, results, steps, diffs, out=out)
-    return {"results": results, "steps": steps, "mean_abs_diff": diffs}
+    print_tables(h, w, runs, results, cpu, steps, diffs, out=out)
+    return {"results": results, "cpu": cpu, "steps": steps, "mean_abs_diff": diffs}
 
 
-def print_tables(h, w, runs, results, steps, diffs, *, out=print) -> None:
+def print_tables(h, w, runs, results, cpu, steps, diffs, *, out=print) -> None:
     mp = h * w / 1e6
     ahd = float(np.median(results["rawpy AHD"]))
     out("")
@@ -315,11 +323,13 @@ def print_tables(h, w, runs, results, steps, diffs, *, out=print) -> None:
     out("")
     out(f"{_thread_line()}")
     out("")
-    out("| render | median s | min s | MP/s (median) | ratio to rawpy AHD | mean abs diff to AHD (8-bit levels) |")
-    out("|---|---:|---:|---:|---:|---:|")
+    out("| render | median s | min s | MP/s (median) | ratio to rawpy AHD | median CPU s (all threads) "
+        "| mean abs diff to AHD (8-bit levels) |")
+    out("|---|---:|---:|---:|---:|---:|---:|")
     for k in [f"simcam {m}" for m in DEMOSAIC_METHODS] + [f"rawpy {a}" for a in RAWPY_ALGOS]:
         med = float(np.median(results[k]))
-        out(f"| {k} | {med:.3f} | {min(results[k]):.3f} | {mp / med:.1f} | {med / ahd:.2f} | {diffs[k]:.2f} |")
+        out(f"| {k} | {med:.3f} | {min(results[k]):.3f} | {mp / med:.1f} | {med / ahd:.2f} "
+            f"| {np.median(cpu[k]):.3f} | {diffs[k]:.2f} |")
     out("")
     out(f"### simcam render steps, median seconds of {runs} runs")
     out("")
