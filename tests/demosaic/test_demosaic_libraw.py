@@ -41,3 +41,18 @@ def test_bilinear_equals_libraw_linear_on_canon_550d(shared_file):
         # ~9 of 2e6 values differ by one code (LibRaw's integer path); none by more
         assert np.abs(diff).max() <= 1.0, cfa
         assert np.count_nonzero(diff) < 1e-4 * diff.size, cfa
+
+
+@pytest.mark.shared_data
+def test_malvar_equals_colour_demosaicing_on_real_crop(shared_file):
+    cd = pytest.importorskip("colour_demosaicing")
+    from simcam.demosaic import demosaic_malvar2004
+
+    path = shared_file("dng/canon_550d_colorchecker.dng")
+    with rawpy.imread(str(path)) as raw:
+        visible = raw.raw_image_visible.astype(np.float32)
+        black, white = float(raw.black_level_per_channel[0]), float(raw.white_level)
+    crop = (visible[400:656, 600:856] - black) / (white - black)  # even offsets: still RGGB
+    ours = demosaic_malvar2004(crop, "RGGB")
+    ref = cd.demosaicing_CFA_Bayer_Malvar2004(crop.astype(np.float64), "RGGB")
+    np.testing.assert_allclose(ours[2:-2, 2:-2], ref[2:-2, 2:-2], rtol=1e-5, atol=2e-6)
