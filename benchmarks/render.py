@@ -23,6 +23,7 @@ Usage::
     python benchmarks/render.py                # 4000x3000, 5 rounds
     python benchmarks/render.py --quick        # 1000x750, 3 rounds (smoke test)
     python benchmarks/render.py --size 3000x4000 --runs 7
+    python benchmarks/render.py --dng ../shared/data/dng/gopro_hero7_iso252.dng
 """
 
 from __future__ import annotations
@@ -104,12 +105,9 @@ def synthetic_frame(h: int, w: int, cfa: str = "RGGB", seed: int = 0) -> RawFram
 
 def write_synthetic_dng(path: str | Path, h: int, w: int, seed: int = 0) -> Path:
     """Write the synthetic capture as an uncompressed 16-bit DNG with simcam's writer."""
-    frame = synthetic_frame(h, w, seed=seed)
-    try:
-        from simcam.io.dng_write import write_dng
-    except ImportError:  # DNG writer not merged yet: stand-in below
-        return _standin_write_dng(Path(path), frame)
-    return Path(write_dng(path, frame))
+    from simcam.io.dng_write import write_dng
+
+    return Path(write_dng(path, synthetic_frame(h, w, seed=seed)))
 
 
 # -- renders ---------------------------------------------------------------------------------
@@ -124,30 +122,30 @@ def simcam_pipeline(method: str):
 
 def simcam_render(path: Path, pipe, *, steps: dict[str, float] | None = None) -> np.ndarray:
     """DNG -> uint8 sRGB through simcam; optionally accumulate per-step seconds in ``steps``."""
+    from simcam.io.dng import read_dng
     from simcam.io.images import to_samples
 
-    try:
-        from simcam.io.dng import read_dng
-    except ImportError:  # DNG reader not merged yet
-        read_dng = _standin_read_dng
-
-    t0 = time.perf_counter()
+    t = _clock()
     frame = read_dng(path)
-    t1 = time.perf_counter()
-    _add(steps, "read_dng", t1 - t0)
+    t = _add(steps, "read_dng", t)
     for stage in pipe.stages:
-        t0 = time.perf_counter()
         frame = stage(frame)
-        _add(steps, stage.type, time.perf_counter() - t0)
-    t0 = time.perf_counter()
+        t = _add(steps, stage.type, t)
     out = to_samples(frame.data, "uint8")
-    _add(steps, "to_uint8", time.perf_counter() - t0)
+    _add(steps, "to_uint8", t)
     return out
 
 
-def _add(steps, key, dt):
+def _clock() -> tuple[float, float]:
+    return time.perf_counter(), time.process_time()
+
+
+def _add(steps, key, since: tuple[float, float]) -> tuple[float, float]:
+    """Record (wall, CPU) seconds since ``since`` under ``key``; return the new clock."""
+    now = _clock()
     if steps is not None:
-        steps.setdefault(key, []).append(dt)
+        steps.setdefault(key, []).append((now[0] - since[0], now[1] - since[1]))
+    return now
 
 
 def rawpy_render(path: Path, algo: str) -> np.ndarray:
@@ -161,48 +159,7 @@ def rawpy_render(path: Path, algo: str) -> np.ndarray:
         )
 
 
-# -- stand-ins used only until the DNG reader/writer and the colour stages are on main --------
-def _standin_write_dng(path: Path, frame: RawFrame) -> Path:
-    """Minimal uncompressed CFA DNG 1.4 with tifffile (the tags LibRaw needs)."""
-    import tifffile
-
-    def rat(vals, den=1_000_000):
-        return tuple(v for x in vals for v in (int(round(float(x) * den)), den))
-
-    m = frame.meta
-    tags = [
-        (271, 2, 0, m.make, True), (272, 2, 0, m.model, True),
-        (33421, 3, 2, (2, 2), True), (33422, 1, 4, tuple("RGB".index(c) for c in m.cfa), True),
-        (50706, 1, 4, (1, 4, 0, 0), True), (50707, 1, 4, (1, 1, 0, 0), True),
-        (50708, 2, 0, m.unique_camera_model, True),
-        (50714, 5, 1, rat([float(m.black_level.ravel()[0])]), True), (50717, 4, 1, (int(m.white_level),), True),
-        (50721, 10, 9, rat(m.color_matrix1.ravel()), True), (50778, 3, 1, (21,), True),
-        (50728, 5, 3, rat(m.as_shot_neutral), True),
-    ]
-    tifffile.imwrite(path, frame.data.astype(np.uint16), photometric=32803, extratags=tags, subfiletype=0)
-    return path
-
-
-def _standin_read_dng(path: Path) -> RawFrame:
-    """Pixels through rawpy, tags through tifffile (only those the stand-in writer sets)."""
-    import rawpy
-    import tifffile
-
-    with rawpy.imread(str(path)) as raw:
-        data = np.array(raw.raw_image, dtype=np.float32, copy=True)
-    with tifffile.TiffFile(path) as tif:
-        t = {tag.code: tag.value for tag in tif.pages[0].tags.values()}
-    num = lambda v: np.asarray(v, dtype=np.float64).reshape(-1, 2)  # noqa: E731
-    ratv = lambda v: num(v)[:, 0] / num(v)[:, 1]  # noqa: E731
-    meta = CameraMeta(
-        make=t[271], model=t[272], cfa="".join("RGB"[i] for i in t[33422]),
-        black_level=ratv(t[50714]).reshape(1, 1), white_level=float(t[50717]),
-        color_matrix1=ratv(t[50721]).reshape(3, 3), calibration_illuminant1=int(t[50778]),
-        as_shot_neutral=ratv(t[50728]), source=str(path),
-    )
-    return RawFrame(data, meta, kind="raw_dn")
-
-
+# -- stand-ins used only until the colour stages (white balance, colour, sRGB curve) are on main --
 class _StandinStep:
     """A timed render step that is not (yet) a registered stage."""
 
@@ -246,34 +203,39 @@ def _standin_srgb_encode(frame: RawFrame) -> RawFrame:
 
 
 class _StandinPipeline:
-    """normalize, crop, white balance, demosaic, camera -> sRGB, sRGB encode (stand-in steps)."""
+    """normalize, lens shading, crop, white balance*, demosaic, camera -> sRGB*, sRGB encode* (* stand-ins)."""
 
     standin = True
 
     def __init__(self, method: str):
         from simcam.stages.demosaic import Demosaic
+        from simcam.stages.lens_shading import LensShading
         from simcam.stages.raw import Crop, Normalize
 
-        self.stages = [Normalize(), Crop(), _StandinStep("white_balance*", _standin_white_balance),
+        self.stages = [Normalize(), LensShading(), Crop(), _StandinStep("white_balance*", _standin_white_balance),
                        Demosaic(method=method), _StandinStep("camera_to_srgb*", _standin_camera_to_srgb),
                        _StandinStep("srgb_encode*", _standin_srgb_encode)]
 
 
 # -- benchmark -------------------------------------------------------------------------------
 def run_benchmark(h: int, w: int, runs: int, *, workdir: str | Path | None = None, save: str | Path | None = None,
-                  out=print) -> dict:
+                  dng: str | Path | None = None, out=print) -> dict:
     """Time every configuration ``runs`` times (interleaved) and print the tables.
 
     Returns a dict with ``"results"`` (label -> list of wall seconds), ``"cpu"``
     (label -> list of process CPU seconds, all threads), ``"steps"`` (method ->
-    step -> list of seconds) and ``"mean_abs_diff"`` (label -> mean absolute 8-bit
+    step -> list of (wall, CPU) seconds) and ``"mean_abs_diff"`` (label -> mean absolute 8-bit
     difference to rawpy AHD, a sanity check of the render).
     """
     with tempfile.TemporaryDirectory(dir=workdir) as tmp:
-        path = Path(tmp) / "synthetic.dng"
-        t0 = time.perf_counter()
-        write_synthetic_dng(path, h, w)
-        out(f"wrote {w}x{h} synthetic DNG ({path.stat().st_size / 1e6:.1f} MB) in {time.perf_counter() - t0:.2f} s")
+        if dng is None:
+            path = Path(tmp) / "synthetic.dng"
+            t0 = time.perf_counter()
+            write_synthetic_dng(path, h, w)
+            out(f"wrote {w}x{h} synthetic DNG ({path.stat().st_size / 1e6:.1f} MB) in {time.perf_counter() - t0:.2f} s")
+        else:
+            path = Path(dng)
+            out(f"input: {path}")
         pipes = {m: simcam_pipeline(m) for m in DEMOSAIC_METHODS}
         results: dict[str, list[float]] = {}
         cpu: dict[str, list[float]] = {}
@@ -311,6 +273,7 @@ def run_benchmark(h: int, w: int, runs: int, *, workdir: str | Path | None = Non
             raise RuntimeError(f"{k}: output shape {img.shape} differs from rawpy's {ref.shape}")
         b = 8  # ignore borders, where demosaicers legitimately differ
         diffs[k] = float(np.mean(np.abs(img[b:-b, b:-b].astype(np.float32) - ref[b:-b, b:-b])))
+    h, w = ref.shape[:2]
     print_tables(h, w, runs, results, cpu, steps, diffs, out=out)
     return {"results": results, "cpu": cpu, "steps": steps, "mean_abs_diff": diffs}
 
@@ -331,15 +294,20 @@ def print_tables(h, w, runs, results, cpu, steps, diffs, *, out=print) -> None:
         out(f"| {k} | {med:.3f} | {min(results[k]):.3f} | {mp / med:.1f} | {med / ahd:.2f} "
             f"| {np.median(cpu[k]):.3f} | {diffs[k]:.2f} |")
     out("")
-    out(f"### simcam render steps, median seconds of {runs} runs")
+    out(f"### simcam render steps, median seconds of {runs} runs (wall; CPU of this process)")
     out("")
     keys = list(next(iter(steps.values())).keys())
-    out("| step | " + " | ".join(DEMOSAIC_METHODS) + " |")
-    out("|---|" + "---:|" * len(DEMOSAIC_METHODS))
+    out("| step | " + " | ".join(f"{m} wall | {m} CPU" for m in DEMOSAIC_METHODS) + " |")
+    out("|---|" + "---:|---:|" * len(DEMOSAIC_METHODS))
+
+    def med(m, k, i):
+        return float(np.median([v[i] for v in steps[m][k]]))
+
     for k in keys:
-        out(f"| {k} | " + " | ".join(f"{np.median(steps[m][k]):.3f}" for m in DEMOSAIC_METHODS) + " |")
+        out(f"| {k} | " + " | ".join(f"{med(m, k, 0):.3f} | {med(m, k, 1):.3f}" for m in DEMOSAIC_METHODS) + " |")
     out("| **sum of steps** | " + " | ".join(
-        f"{sum(np.median(v) for v in steps[m].values()):.3f}" for m in DEMOSAIC_METHODS) + " |")
+        f"{sum(med(m, k, 0) for k in keys):.3f} | {sum(med(m, k, 1) for k in keys):.3f}" for m in DEMOSAIC_METHODS)
+        + " |")
     if any(k.endswith("*") for k in keys):
         out("")
         out("(*) stand-in step written in this script until the colour stages are merged.")
@@ -375,6 +343,7 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--runs", type=int, default=None, help="timed rounds (default 5; 3 with --quick)")
     ap.add_argument("--quick", action="store_true", help="smoke test: 1000x750, 3 rounds")
     ap.add_argument("--workdir", default=None, help="folder for the temporary DNG (default: system temp)")
+    ap.add_argument("--dng", default=None, help="benchmark this DNG instead of the synthetic one (--size ignored)")
     ap.add_argument("--save", default=None, help="folder to write the four renders as PNG (for a look)")
     ap.add_argument("--omp-threads", type=int, default=None,
                     help="set OMP_NUM_THREADS for LibRaw (must happen before rawpy is imported)")
@@ -387,7 +356,7 @@ def main(argv: list[str] | None = None) -> dict:
     runs = args.runs or (3 if args.quick else 5)
     if runs < 1:
         ap.error(f"--runs: expected at least 1, got {runs}")
-    return run_benchmark(h, w, runs, workdir=args.workdir, save=args.save)
+    return run_benchmark(h, w, runs, workdir=args.workdir, save=args.save, dng=args.dng)
 
 
 if __name__ == "__main__":
