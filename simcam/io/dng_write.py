@@ -23,7 +23,6 @@ from __future__ import annotations
 import math
 import os
 import struct
-import tempfile
 from fractions import Fraction
 from pathlib import Path
 from typing import Any
@@ -31,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from ..cfa import shift_pattern
+from .atomic import atomic_output
 from ..errors import DngError
 from ..frame import CameraMeta, RawFrame
 from .dng import T
@@ -337,13 +337,8 @@ def write_dng(path: str | os.PathLike, frame: RawFrame | np.ndarray, meta: Camer
     body = header + ifd_bytes
     body += b"\0" * (strip_offset - len(body))
 
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}-", suffix=".dng.tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
+    with atomic_output(path, suffix=".dng.tmp") as tmp:
+        with open(tmp, "wb") as f:
             f.write(body)
             f.write(np.ascontiguousarray(samples).tobytes())
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
     return path
