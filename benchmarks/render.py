@@ -115,7 +115,7 @@ def simcam_pipeline(method: str):
     """The built-in ``srgb`` pipeline with ``demosaic.method`` set."""
     from simcam.pipeline import Pipeline, builtin_pipelines
 
-    if "srgb" not in builtin_pipelines():  # colour stages not merged yet: stand-ins below
+    if "srgb" not in builtin_pipelines():  # not merged yet: build it in code (stand-ins below)
         return _StandinPipeline(method)
     return Pipeline.from_yaml("srgb").with_overrides({"demosaic.method": method})
 
@@ -203,18 +203,31 @@ def _standin_srgb_encode(frame: RawFrame) -> RawFrame:
 
 
 class _StandinPipeline:
-    """normalize, lens shading, crop, white balance*, demosaic, camera -> sRGB*, sRGB encode* (* stand-ins)."""
+    """The render built in code: registered stages where they exist, stand-ins (*) where not.
 
-    standin = True
+    normalize, lens_shading, crop, white_balance, demosaic, camera_to_xyz + xyz_to_srgb
+    (stand-in: camera_to_srgb*), gamma (stand-in: srgb_encode*).
+    """
 
     def __init__(self, method: str):
-        from simcam.stages.demosaic import Demosaic
-        from simcam.stages.lens_shading import LensShading
-        from simcam.stages.raw import Crop, Normalize
+        from simcam.stages.base import stage_types
 
-        self.stages = [Normalize(), LensShading(), Crop(), _StandinStep("white_balance*", _standin_white_balance),
-                       Demosaic(method=method), _StandinStep("camera_to_srgb*", _standin_camera_to_srgb),
-                       _StandinStep("srgb_encode*", _standin_srgb_encode)]
+        have = stage_types()
+        nodes = [("normalize", {}), ("lens_shading", {}), ("crop", {}), ("white_balance", {}),
+                 ("demosaic", {"method": method}), ("camera_to_xyz", {}), ("xyz_to_srgb", {}),
+                 ("gamma", {"curve": "srgb"})]
+        standins = {"white_balance": ("white_balance*", _standin_white_balance),
+                    "camera_to_xyz": ("camera_to_srgb*", _standin_camera_to_srgb),
+                    "gamma": ("srgb_encode*", _standin_srgb_encode)}
+        real_colour = all(k in have for k in ("camera_to_xyz", "xyz_to_srgb"))
+        self.stages = []
+        for key, params in nodes:
+            if key == "xyz_to_srgb" and not real_colour:
+                continue  # the camera_to_srgb* stand-in covers both
+            if key in have and (key != "camera_to_xyz" or real_colour):
+                self.stages.append(have[key](**params))
+            else:
+                self.stages.append(_StandinStep(*standins[key]))
 
 
 # -- benchmark -------------------------------------------------------------------------------
@@ -237,6 +250,9 @@ def run_benchmark(h: int, w: int, runs: int, *, workdir: str | Path | None = Non
             path = Path(dng)
             out(f"input: {path}")
         pipes = {m: simcam_pipeline(m) for m in DEMOSAIC_METHODS}
+        p0 = pipes[DEMOSAIC_METHODS[0]]
+        how = f"built-in {p0.source}" if getattr(p0, "source", "") else "built in this script"
+        out(f"simcam pipeline ({how}): {[s.type for s in p0.stages]}, demosaic.method = {list(DEMOSAIC_METHODS)}")
         results: dict[str, list[float]] = {}
         cpu: dict[str, list[float]] = {}
         steps: dict[str, dict[str, list[float]]] = {m: {} for m in DEMOSAIC_METHODS}
