@@ -34,6 +34,7 @@ STAGE_CASES: dict[str, tuple[dict, str]] = {
     "clip": ({}, "linear_srgb"),
     "quantize": ({"bits": 8}, "display"),
     "noise": ({"model": {"type": "nlf", "beta1": 1.0e-3, "beta2": 1.0e-5}}, "raw"),
+    "clip_raw": ({}, "raw"),
 }
 
 
