@@ -112,6 +112,9 @@ def test_illuminant_cct_matches_dng_sdk_table():
     for code in list(range(0, 30)) + [255, 1000]:
         assert D.illuminant_cct(code) == H_CCT(code), code
     assert D.illuminant_cct(None) is None and D.illuminant_xy(0) is None and D.illuminant_xy(255) is None
+    # any value may be found in a file: non-integers, text, arrays
+    assert D.illuminant_cct(21.5) is None and D.illuminant_cct("D65") is None and D.illuminant_cct(-3) is None
+    assert D.illuminant_cct(np.array([21], dtype=np.uint16)) == 6500.0
 
 
 def test_illuminant_xy_of_cie_illuminants_and_planckian_codes():

@@ -219,3 +219,39 @@ def test_bad_param_in_yaml():
 
     with pytest.raises(PipelineError, match=r"stages\[0\].*curve"):
         Pipeline.from_yaml("version: 1\ninput: linear_srgb\nstages:\n  - type: gamma\n    curve: rec709\n")
+
+
+def test_sidd_chain_reproduces_simple_camera_pipeline_after_demosaic():
+    """camera RGB -> display through the sidd-srgb stages vs simple-camera-pipeline's formulas
+    (python/pipeline_utils.py: apply_color_space_transform, transform_xyz_to_srgb, fix_orientation
+    for orientation 3, apply_gamma, and its simple tone curve), written out here in numpy."""
+    from simcam.pipeline import Pipeline
+
+    rng = np.random.default_rng(5)
+    wb = rng.uniform(0.0, 1.0, size=(6, 9, 3))  # white-balanced, clipped camera RGB
+    # their formulas
+    xyz2cam = CM1 / np.sum(CM1, axis=1, keepdims=True)
+    xyz = np.clip(np.einsum("ij,hwj->hwi", np.linalg.inv(xyz2cam), wb), 0.0, 1.0)
+    xyz2srgb = np.array([[3.2404542, -1.5371385, -0.4985314], [-0.9692660, 1.8760108, 0.0415560],
+                         [0.0556434, -0.2040259, 1.0572252]])
+    xyz2srgb = xyz2srgb / np.sum(xyz2srgb, axis=-1, keepdims=True)
+    srgb = np.clip(np.einsum("ij,hwj->hwi", xyz2srgb, xyz), 0.0, 1.0)
+    srgb = srgb[::-1, ::-1]  # orientation 3: rotate 180
+    g = srgb ** (1.0 / 2.2)
+    ref = 3 * g ** 2 - 2 * g ** 3
+    yaml = """
+version: 1
+input: camera_rgb
+stages:
+  - {type: camera_to_xyz, mode: sidd}
+  - {type: clip, low: 0.0, high: 1.0}
+  - {type: xyz_to_srgb, mode: sidd}
+  - {type: clip, low: 0.0, high: 1.0}
+  - {type: orientation, convention: sidd}
+  - {type: gamma, curve: power, exponent: 0.45454545454545453}
+  - {type: tone, curve: sidd}
+"""
+    m = meta(orientation=3, white_balance_gains=1.0 / NEUTRAL)
+    out = Pipeline.from_yaml(yaml)(RawFrame(wb, m, "camera_rgb"))
+    assert out.kind == "display"
+    np.testing.assert_allclose(out.data, ref, atol=2e-5)

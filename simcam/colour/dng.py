@@ -28,6 +28,9 @@ Conventions (documented choices where the specification leaves room):
 * The ForwardMatrix path is used when ForwardMatrix1 (single) or both ForwardMatrix1
   and ForwardMatrix2 (dual) are present; otherwise the ColorMatrix path.
 * The illuminant order does not matter (ColorMatrix1 may be the warmer or the cooler).
+* ForwardMatrix is used as stored. (The Adobe DNG SDK additionally rescales its rows so
+  that camera (1, 1, 1) maps exactly to the D50 white; stored matrices are within about
+  1e-3 of that, and colour-hdri, the reference of the tests, follows the spec text.)
 
 References: Adobe, *Digital Negative (DNG) Specification* 1.6.0.0 (2021), chapter 6;
 Robertson, A. R. (1968), JOSA 58(11), 1528-1535, doi:10.1364/JOSA.58.001528;
@@ -114,18 +117,22 @@ LIGHT_SOURCES: dict[int, LightSource] = {ls.code: ls for ls in (
 
 def illuminant_cct(code: int | None) -> float | None:
     """CCT (K) of an EXIF LightSource code; ``None`` for 0 (unknown), 255 (other) or any unlisted code."""
-    if code is None:
-        return None
-    ls = LIGHT_SOURCES.get(int(code))
+    ls = _light_source(code)
     return None if ls is None else ls.cct
 
 
 def illuminant_xy(code: int | None) -> np.ndarray | None:
     """CIE 1931 xy of an EXIF LightSource code (see :data:`LIGHT_SOURCES`); ``None`` when unknown."""
-    if code is None:
-        return None
-    ls = LIGHT_SOURCES.get(int(code))
+    ls = _light_source(code)
     return None if ls is None else np.array(ls.xy, dtype=np.float64)
+
+
+def _light_source(code) -> LightSource | None:
+    try:
+        value = float(np.asarray(code, dtype=np.float64).ravel()[0])
+    except (TypeError, ValueError, IndexError):
+        return None  # absent or not a number: unknown illuminant
+    return LIGHT_SOURCES.get(int(value)) if value.is_integer() else None
 
 
 # -- chromaticity helpers -----------------------------------------------------------
