@@ -189,6 +189,23 @@ def test_as_shot_white_xy_path(name):
         np.testing.assert_allclose(ours, ref, atol=1e-6)
 
 
+@pytest.mark.parametrize("fm", [True, False], ids=["forward_matrix", "color_matrix"])
+def test_camera_calibration_and_analog_balance(fm):
+    """The real files carry identity CameraCalibration and unit AnalogBalance: exercise both."""
+    t = dict(load("sidd"))
+    t["CameraCalibration1"] = np.array([1.05, 0.01, 0.0, -0.02, 0.97, 0.01, 0.0, 0.03, 1.1])
+    t["CameraCalibration2"] = np.array([0.95, 0.0, 0.02, 0.01, 1.02, 0.0, -0.01, 0.0, 0.9])
+    t["AnalogBalance"] = np.array([1.2, 1.0, 0.85])
+    if not fm:
+        t = {k: v for k, v in t.items() if not k.startswith("ForwardMatrix")}
+    prof = D.DngColorProfile.from_meta(meta_of(t))
+    n = t["AsShotNeutral"]
+    xy = D.camera_neutral_to_xy(prof, n)
+    np.testing.assert_allclose(H.xy_to_camera_neutral(xy, *hdri_args(t)[:7]), n / n[1], atol=1e-9)
+    ref = H.matrix_camera_space_to_XYZ(xy, *hdri_args(t))
+    np.testing.assert_allclose(D.camera_to_xyz_d50(prof, neutral=n), ref, atol=1e-6)
+
+
 def test_matrix_maps_neutral_to_d50_white():
     """Spec property: the camera neutral maps to the D50 white (any path), up to scale."""
     t = load("sidd")
