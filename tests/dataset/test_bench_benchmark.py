@@ -148,3 +148,26 @@ def test_metadata_folder_with_real_sidd_file(tmp_path, shared_file):
     assert b1 == pytest.approx(4.7946e-4, rel=1e-3) and b2 == 0.0
     with pytest.raises(DatasetError, match="expected one per image"):
         load_metadata_dir(tmp_path, 2)
+
+
+def test_cli_srgb_scores_with_sidd_metadata_and_pipeline(tmp_path, shared_file):
+    import os
+
+    from simcam.io.sidd import read_sidd_meta
+
+    src = shared_file("sidd/0001_METADATA_RAW_010.MAT")
+    meta_dir = tmp_path / "meta"
+    meta_dir.mkdir()
+    os.symlink(src, meta_dir / "0001_METADATA_RAW_010.MAT")
+    noisy, gt = _blocks(5, shape=(1, 1, 32, 32), sigma=0.02)
+    write_blocks(tmp_path / "n.mat", noisy, "N")
+    write_blocks(tmp_path / "g.mat", gt, "G")
+    assert main(["bench", "--noisy", str(tmp_path / "n.mat"), "--gt", str(tmp_path / "g.mat"),
+                 "--metadata", str(meta_dir), "--json", str(tmp_path / "r.json")]) == 0
+    r = json.loads((tmp_path / "r.json").read_text())
+    render = pipeline_renderer("sidd-srgb")
+    meta = read_sidd_meta(src)
+    a, b = render(gt[0, 0], meta), render(noisy[0, 0], meta)
+    assert a.shape == (32, 32, 3)
+    assert r["srgb"]["psnr"] == pytest.approx(peak_signal_noise_ratio(a, b, data_range=1.0), rel=1e-9)
+    assert r["srgb"]["ssim"] == pytest.approx(_sk_ssim(a, b, channel_axis=-1), abs=1e-6)
