@@ -22,11 +22,12 @@ is built by the ratio recurrence ``p(k+1)/p(k) = lam/(k+1)`` from the mode in
 extended precision (``np.longdouble``) and normalised; the two tails are cut
 where their mass is below ``2**-61`` each. The kept mass is renormalised and
 quantised to integers (column capacity ``2**51``, the rounding units going to
-the mode), padded with zero-mass columns to a power-of-two count, and turned
-into an alias table by Vose's algorithm in exact integer arithmetic. The
-column is chosen by the top bits of the word (exactly uniform) and the next 51
-bits are compared with its threshold. Total variation distance to the exact
-Poisson law: below ``2**-60`` (tails) + ``2**-51`` (quantisation) per table.
+the mode) and turned into an alias table by Vose's algorithm in exact integer
+arithmetic. With ``n`` columns, the 128-bit product ``w * n`` of the 64-bit
+word picks the column (high 64 bits: uniform to within ``2**-64``) and the
+top 51 bits of its low 64 bits are compared with the column's threshold.
+Total variation distance to the exact Poisson law: below ``2**-60`` (tails)
++ ``2**-51`` (quantisation and column choice) per table.
 Coarse tables exist for ``64 a < 64 na``, ``na`` the power of two covering the
 largest mean seen, and are cached (LRU on ``na``); a table's content does not
 depend on ``na``, so neither do the samples. Building all tables up to mean
@@ -73,7 +74,7 @@ TABLE_LAMBDA_MAX = 2**14
 TAIL_MASS = 2.0**-61
 #: alias column capacity (threshold resolution 2**-51).
 ALIAS_BITS = 51
-#: bits of the alias index in a packed entry (tables have <= 2**12 columns).
+#: bits of the alias index in a packed entry (tables have < 2**12 columns).
 IDX_BITS = 12
 
 _U11, _U8, _U1 = np.uint64(11), np.uint64(8), np.uint64(1)
@@ -113,11 +114,11 @@ def pmf_window(lam: float) -> tuple[int, np.ndarray]:
 
 
 def alias_counts(p: np.ndarray) -> np.ndarray:
-    """Integer column masses: ``p`` (longdouble) padded to a power-of-two length n >= 2,
-    as int64 counts summing exactly to ``n * 2**ALIAS_BITS`` (the remaining
-    rounding units go to the most probable entry)."""
-    n = max(2, 1 << (int(p.size) - 1).bit_length())
-    if n > 1 << IDX_BITS:
+    """Integer column masses of ``p`` (longdouble, n < 2**IDX_BITS entries): int64
+    counts summing exactly to ``n * 2**ALIAS_BITS`` (the remaining rounding
+    units go to the most probable entry)."""
+    n = int(p.size)
+    if n >= 1 << IDX_BITS:
         raise ValueError(f"table of {p.size} entries exceeds {1 << IDX_BITS}")
     total = n << ALIAS_BITS
     c = np.zeros(n, dtype=np.int64)
@@ -178,24 +179,35 @@ def table_means(na: int) -> np.ndarray:
 def build_tables(na: int):
     """Packed alias tables for the fine grid and ``na`` coarse means (cached).
 
-    Returns ``(entries, start, bits, k0)``: table ``t`` has ``2**bits[t]``
-    packed entries at ``entries[start[t]:]`` over counts ``k0[t] ...``.
+    Returns ``(entries, start, size, k0)``: table ``t`` has ``size[t]``
+    packed entries at ``entries[start[t]:]`` over counts ``k0[t] ...``; the
+    fine and the integer tables have one size per level and ``k0 = 0``.
     """
     ents, k0s = [], []
-    for lam in table_means(na):
-        k0, p = pmf_window(float(lam))
+    wins = [pmf_window(float(lam)) for lam in table_means(na)]
+    # the fine and integer tables are padded with zero-mass columns to one
+    # power-of-two width per level, from count 0: the kernel finds them without
+    # a lookup of their offset, size or first count, and picks the column with
+    # the top bits of the word (exactly uniform)
+    for lo, hi in ((0, FINE), (FINE, N_FINE)):
+        width = 1 << (max(k0 + p.size for k0, p in wins[lo:hi]) - 1).bit_length()
+        for t in range(lo, hi):
+            k0, p = wins[t]
+            q = np.zeros(width, dtype=np.longdouble)
+            q[k0:k0 + p.size] = p
+            wins[t] = (0, q)
+    for k0, p in wins:
         ents.append(alias_pack(alias_counts(p)))
         k0s.append(k0)
     size = np.array([e.size for e in ents], dtype=np.int64)
     start = np.concatenate([[0], np.cumsum(size)[:-1]]).astype(np.int64)
-    bits = np.array([int(s).bit_length() - 1 for s in size], dtype=np.int64)
-    return np.concatenate(ents), start, bits, np.array(k0s, dtype=np.int64)
+    return np.concatenate(ents), start, size, np.array(k0s, dtype=np.int64)
 
 
 def table_pmf(tabs, t: int) -> tuple[int, np.ndarray]:
     """The exact law ``(k0, pmf)`` that table ``t`` samples (float64; for tests)."""
-    ents, start, bits, k0 = tabs
-    n = 1 << int(bits[t])
+    ents, start, size, k0 = tabs
+    n = int(size[t])
     e = ents[start[t]:start[t] + n]
     thr = (e >> np.uint64(IDX_BITS)).astype(np.float64) / 2.0**ALIAS_BITS
     ali = (e & _MIDX).astype(np.int64)
@@ -276,16 +288,39 @@ def _next(ctr):
     return z ^ (z >> np.uint64(31)), ctr
 
 
+_M32 = np.uint64(0xFFFFFFFF)
+_U32 = np.uint64(32)
+
+
 @njit(inline="always")
-def _lookup(w, t, ents, start, bits, k0):
-    """Alias-table draw from table ``t`` with one 64-bit word: the top ``bits``
-    bits pick the column (exactly uniform, the size is a power of two), the next
-    51 bits are compared with its threshold."""
-    b = np.uint64(bits[t])
-    i = w >> (np.uint64(64) - b)
+def _lookup(w, t, ents, start, size, k0):
+    """Alias-table draw from table ``t`` with one 64-bit word ``w``: column
+    ``floor(w n / 2^64)`` (n = size), threshold test with the top 51 bits of
+    ``w n mod 2^64`` (see module docstring)."""
+    n = np.uint64(size[t])
+    i = ((w >> _U32) * n + (((w & _M32) * n) >> _U32)) >> _U32
     e = ents[start[t] + np.int64(i)]
-    col = i if ((w << b) >> _USH) < (e >> _UIDX) else (e & _MIDX)
+    col = i if ((w * n) >> _USH) < (e >> _UIDX) else (e & _MIDX)
     return k0[t] + np.int64(col)
+
+
+@njit(inline="always")
+def _log2(n):
+    b = 0
+    while (np.int64(1) << b) < n:
+        b += 1
+    return np.uint64(b)
+
+
+@njit(inline="always")
+def _lookup_fixed(w, off, b, ents):
+    """:func:`_lookup` for a table of ``2**b`` columns at ``off`` (uint64) over
+    counts 0, 1, ...: the top ``b`` bits of ``w`` pick the column, the next 51
+    are compared with its threshold."""
+    i = w >> (np.uint64(64) - b)
+    e = ents[off + i]
+    col = i if ((w << b) >> _USH) < (e >> _UIDX) else (e & _MIDX)
+    return np.int64(col)
 
 
 #: pixels per pass of the kernel (words are generated for a pass at once).
@@ -307,7 +342,7 @@ def _u53(w):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def pg_kernel(clean, scale, sd, out, seed, ents, start, bits, k0, zk, zw, zf, zr):
+def pg_kernel(clean, scale, sd, out, seed, ents, start, size, k0, zk, zw, zf, zr):
     """Fill ``out`` (float32, 1-D) with ``scale * Poisson(clean / scale) + sd * z``.
 
     ``scale`` and ``sd`` are float32 arrays of length 1 (broadcast) or
@@ -323,13 +358,18 @@ def pg_kernel(clean, scale, sd, out, seed, ents, start, bits, k0, zk, zw, zf, zr
     sst = 1 if scale.size > 1 else 0
     dst = 1 if sd.size > 1 else 0
     na = start.size - N_FINE
+    n_f = size[0]  # fine tables: start j * n_f (a power of two)
+    off_m = start[FINE]  # integer tables: start off_m + m * n_m
+    n_m = size[FINE]
+    b_f = _log2(n_f)
+    b_m = _log2(n_m)
     bad = 0
     words = np.empty(PASS * WORDS, np.uint64)
     lamb = np.empty(PASS, np.float64)
     rrb = np.empty(PASS, np.float64)
     ta = np.empty(PASS, np.int64)
-    tf = np.empty(PASS, np.int64)
-    tm = np.empty(PASS, np.int64)
+    tf = np.empty(PASS, np.uint64)
+    tm = np.empty(PASS, np.uint64)
     kb = np.empty(PASS, np.int64)
     for p0 in range(0, n, PASS):
         m = min(PASS, n - p0)
@@ -338,28 +378,31 @@ def pg_kernel(clean, scale, sd, out, seed, ents, start, bits, k0, zk, zw, zf, zr
             words[q] = _mix(base + np.uint64(q + 1) * _GAMMA)
         # the work is split into short loops: one long dependency chain per
         # pixel (divide, convert, two dependent table loads...) would stall.
+        if sst:
+            for ii in range(m):
+                lamb[ii] = np.float64(clean[p0 + ii] / scale[p0 + ii])  # float32 division
+        else:
+            sc0 = scale[0]
+            for ii in range(m):
+                lamb[ii] = np.float64(clean[p0 + ii] / sc0)
         for ii in range(m):
-            i = p0 + ii
-            lam = np.float64(clean[i] / scale[i * sst])  # float32 division, as numpy's float32 path
-            lamb[ii] = lam
-            lc = min(lam, TABLE_LAMBDA_MAX - 1.0)  # PTRS above (tables not used)
+            lc = min(lamb[ii], TABLE_LAMBDA_MAX - 1.0)  # PTRS above (tables not used)
             ia = np.int64(lc * (1.0 / A_STEP))  # exact: A_STEP and FINE are powers of two
             rem = lc - ia * float(A_STEP)
             mi = np.int64(rem)
             rem -= mi
             j = np.int64(rem * FINE)
             rrb[ii] = rem - j * (1.0 / FINE)
-            if ia >= na:
-                bad += 1
-                ia = 0
-            ta[ii] = N_FINE + ia
-            tm[ii] = FINE + mi
-            tf[ii] = j
+            over = ia >= na
+            bad += over
+            ta[ii] = N_FINE + min(ia, na - 1)
+            tm[ii] = np.uint64(off_m + mi * n_m)
+            tf[ii] = np.uint64(j * n_f)
         # tables for mean 0 (a, m or j = 0) always give 0: no branches
         for ii in range(m):
-            kb[ii] = (_lookup(words[ii * WORDS], ta[ii], ents, start, bits, k0)
-                      + _lookup(words[ii * WORDS + 1], tm[ii], ents, start, bits, k0)
-                      + _lookup(words[ii * WORDS + 2], tf[ii], ents, start, bits, k0))
+            kb[ii] = (_lookup(words[ii * WORDS], ta[ii], ents, start, size, k0)
+                      + _lookup_fixed(words[ii * WORDS + 1], tm[ii], b_m, ents)
+                      + _lookup_fixed(words[ii * WORDS + 2], tf[ii], b_f, ents))
         for ii in range(m):
             i = p0 + ii
             lam = lamb[ii]
