@@ -127,46 +127,29 @@ def alias_counts(p: np.ndarray) -> np.ndarray:
     return c
 
 
-@njit(cache=True)
-def alias_pack(c):
+def alias_pack(c: np.ndarray) -> np.ndarray:
     """Walker/Vose alias table of integer column masses ``c`` (sum = n * 2**ALIAS_BITS), exact.
 
     Entry ``i`` packs ``threshold << IDX_BITS | alias``: column ``i`` yields
     ``i`` when a 51-bit uniform integer is below the threshold, else ``alias``.
+    Pure Python integers (exact; no compile time).
     """
-    M = np.int64(1) << ALIAS_BITS
-    n = c.size
-    c = c.copy()
-    out = np.empty(n, np.uint64)
-    small = np.empty(n, np.int64)
-    large = np.empty(n, np.int64)
-    ns = 0
-    nl = 0
-    for i in range(n):
-        if c[i] < M:
-            small[ns] = i
-            ns += 1
-        else:
-            large[nl] = i
-            nl += 1
-    while ns > 0 and nl > 0:
-        ns -= 1
-        s = small[ns]
-        nl -= 1
-        l = large[nl]  # noqa: E741
-        out[s] = (np.uint64(c[s]) << _UIDX) | np.uint64(l)
+    M = 1 << ALIAS_BITS
+    c = [int(x) for x in c]
+    n = len(c)
+    thr = [M] * n
+    ali = list(range(n))
+    small = [i for i in range(n) if c[i] < M]
+    large = [i for i in range(n) if c[i] >= M]
+    while small and large:
+        s = small.pop()
+        l = large[-1]  # noqa: E741
+        thr[s], ali[s] = c[s], l
         c[l] -= M - c[s]
         if c[l] < M:
-            small[ns] = l
-            ns += 1
-        else:
-            large[nl] = l
-            nl += 1
-    for j in range(ns):  # exact integer masses: these are full columns
-        out[small[j]] = (np.uint64(M) << _UIDX) | np.uint64(small[j])
-    for j in range(nl):
-        out[large[j]] = (np.uint64(M) << _UIDX) | np.uint64(large[j])
-    return out
+            small.append(large.pop())
+    # what is left are full columns (exact integer masses): threshold M, alias itself
+    return (np.array(thr, dtype=np.uint64) << np.uint64(IDX_BITS)) | np.array(ali, dtype=np.uint64)
 
 
 def table_means(na: int) -> np.ndarray:
@@ -324,7 +307,7 @@ def _lookup_fixed(w, off, b, ents):
 
 
 #: pixels per pass of the kernel (words are generated for a pass at once).
-PASS = 1024
+PASS = 512
 #: 64-bit words per pixel from the main stream: coarse, integer, fine, remainder, normal.
 WORDS = 5
 
