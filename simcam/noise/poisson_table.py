@@ -321,7 +321,7 @@ def _mix(z):
 
 @njit(inline="always")
 def _u53(w):
-    return np.float64(w >> _U11) * _INV53
+    return np.float64(np.int64(w >> _U11)) * _INV53  # signed: one instruction
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -438,7 +438,7 @@ def pg_kernel(clean, scale, sd, out, seed, ents, start, size, k0, zk, zw, zf, zr
                     r >>= _U8
                     neg = (r & _U1) != 0
                     rabs = (r >> _U1) & _M52
-                    z = np.float64(rabs) * zw[idx]
+                    z = np.float64(np.int64(rabs)) * zw[idx]
                     if rabs < zk[idx]:
                         break
                     if idx == 0:
