@@ -260,9 +260,10 @@ def print_tables(h, w, runs, results, cpu, steps, diffs, *, out=print) -> None:
 def _thread_line() -> str:
     omp = os.environ.get("OMP_NUM_THREADS", f"unset (LibRaw OpenMP uses all {os.cpu_count()} cores)")
     blas = os.environ.get("OPENBLAS_NUM_THREADS", "unset")
+    load = f" 1-min load average at the end: {os.getloadavg()[0]:.1f}." if hasattr(os, "getloadavg") else ""
     return (f"Threads: numpy element-wise kernels single-threaded; OMP_NUM_THREADS={omp}; "
             f"OPENBLAS_NUM_THREADS={blas}. Machine: {platform.processor() or platform.machine()}, "
-            f"{os.cpu_count()} cores; numpy {np.__version__}, rawpy {_rawpy_version()}.")
+            f"{os.cpu_count()} cores; numpy {np.__version__}, rawpy {_rawpy_version()}.{load}")
 
 
 def _rawpy_version() -> str:
