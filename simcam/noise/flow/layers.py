@@ -239,7 +239,8 @@ class LUConv1x1(nn.Module):
             self._frozen = (a.clone(), torch.linalg.inv(a.double()).to(a.dtype))
 
     def _mix(self, h, a):
-        return torch.einsum("bchw,cd->bdhw", h, a)
+        # row-vector h @ a per pixel == conv2d with weight a^T (exports as one Conv)
+        return F.conv2d(h, a.t()[:, :, None, None])
 
     def to_latent(self, h, cond):
         a = self._frozen[0] if self._frozen is not None else self.matrix()
