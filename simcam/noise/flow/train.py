@@ -122,10 +122,10 @@ def plot_metrics(csv_path: Path, png_path: Path, reference_nll: float | None = N
     ax[0].legend()
     ax[1].semilogy(ep, [float(r["test_marginal_kl"]) for r in rows], "o-")
     ax[1].axhline(0.01, color="k", ls="--", label="0.01")
-    ax[1].set(xlabel="epoch", ylabel="marginal KL (nats)", title="test marginal KL\n" + KL_BINNING)
-    ax[1].title.set_fontsize(8)
+    ax[1].set(xlabel="epoch", ylabel="marginal KL (nats)", title="test marginal KL, D(real || model)")
+    fig.text(0.5, 0.01, "marginal KL bins: " + KL_BINNING, ha="center", fontsize=7)
     ax[1].legend()
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.04, 1, 1))
     fig.savefig(png_path, dpi=100)
     plt.close(fig)
 
