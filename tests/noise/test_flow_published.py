@@ -7,6 +7,8 @@ from ../shared/data/noiseflow; tolerances from its README: z and samples within
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 
@@ -51,11 +53,11 @@ def _rel(a, ref):
 
 @pytest.mark.parametrize("mode", ["eval", "train"])
 @pytest.mark.parametrize("k", range(8))
-def test_golden_vectors(golden, weights, k, mode):
+def test_golden_vectors(golden, weights, published_flow, k, mode):
     # case 7 (ISO 200) documents the released code's silent factor exp(0): reproduce it
     # with legacy_iso; every other case runs with the default (log-ISO interpolation).
     legacy = not bool(golden["iso_supported"][k])
-    flow = _load(weights, legacy_iso=legacy)
+    flow = _load(weights, legacy_iso=True) if legacy else copy.deepcopy(published_flow)
     if mode == "train":  # batch norm with the statistics of the 2-patch batch
         flow.train()
     c = _case(golden, k)
@@ -71,9 +73,9 @@ def test_golden_vectors(golden, weights, k, mode):
     np.testing.assert_allclose(logdet.numpy(), golden[f"logdet_{mode}"][k], rtol=0, atol=5e-5 * 4096 * 4)
 
 
-def test_released_wrapper_bug_is_not_reproduced(golden, weights):
+def test_released_wrapper_bug_is_not_reproduced(golden, published_flow):
     """The authors' sampler (reversed networks) differs from ours by far more than the tolerance."""
-    flow = _load(weights).train()
+    flow = copy.deepcopy(published_flow).train()
     c = _case(golden, 0)
     with torch.no_grad():
         x = flow.sample(c["latent"], clean=c["clean"], iso=c["iso"], camera=c["camera"])
@@ -81,10 +83,10 @@ def test_released_wrapper_bug_is_not_reproduced(golden, weights):
     assert _rel(x, bug) > 1e-2
 
 
-def test_iso_interpolation_between_knots(golden, weights):
+def test_iso_interpolation_between_knots(golden, weights, published_flow):
     """ISO 200 interpolates in log-ISO; legacy mode falls back to factor 1 (a different model)."""
     c = _case(golden, 7)
-    interp, legacy = _load(weights), _load(weights, legacy_iso=True)
+    interp, legacy = published_flow, _load(weights, legacy_iso=True)
     with torch.no_grad():
         ll = {iso: interp.log_prob(c["noise"], clean=c["clean"], iso=iso, camera=0) for iso in (100.0, 200.0, 400.0)}
         ll_legacy = legacy.log_prob(c["noise"], clean=c["clean"], iso=200.0, camera=0)
@@ -111,10 +113,10 @@ def test_float64_round_trip(golden, weights):
     assert float((z - lat).abs().max()) <= 1e-9
 
 
-def test_iso_outside_range_refused(weights):
+def test_iso_outside_range_refused(published_flow):
     from simcam.errors import NoiseModelError
 
-    flow = _load(weights)
+    flow = published_flow
     x = torch.zeros(1, 4, 4, 4)
     with pytest.raises(NoiseModelError, match="outside the trained range 100..3200"):
         flow.to_latent(x, clean=x, iso=6400.0, camera=0)
