@@ -37,6 +37,9 @@ def _session(path: Path, threads: int | None):
     if not path.is_file():
         raise NoiseModelError(f"{path}: ONNX file not found")
     opts = ort.SessionOptions()
+    # "extended": the NCHWc layout pass of "all" adds reorders that cost more than they
+    # save on 4-channel convolutions (measured in benchmarks/flow.py)
+    opts.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_EXTENDED
     if threads:
         opts.intra_op_num_threads = int(threads)
         opts.inter_op_num_threads = 1
