@@ -31,7 +31,14 @@ rng = np.random.default_rng(0)
 clean = rng.random((1, 4, 8, 8), dtype=np.float32)
 x = s.sample(clean, iso=300.0, camera='B', rng=rng)
 ll = s.log_prob(x, clean=clean, iso=300.0, camera='B')
+import simcam.cli, simcam.noise.flow, simcam.noise.flow.data, simcam.noise.flow.metrics  # torch-free modules
 assert 'torch' not in [m for m in sys.modules if sys.modules[m] is not None]
+from simcam.errors import OptionalDependencyError
+try:
+    import simcam.noise.flow.model
+    raise SystemExit('importing the torch model without torch must fail clearly')
+except OptionalDependencyError as exc:
+    assert "pip install 'simcam[torch]'" in str(exc), exc
 np.save({str(out)!r}, x)
 """
     env = dict(os.environ, PYTHONPATH=str(REPO))
