@@ -70,7 +70,11 @@ def main(argv=None):
 
         t_torch = _median_time(run_torch, args.repeats)
         t_ort = _median_time(run_ort, args.repeats)
-    print(f"Noise Flow sampling, packed {shape}, {mp:.2f} MP mosaic, {args.threads} threads, median of {args.repeats}")
+    import os
+
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    print(f"Noise Flow sampling, packed {shape}, {mp:.2f} MP mosaic, {args.threads} threads, median of {args.repeats}; "
+          f"{os.cpu_count()} CPUs, load average {load:.1f} (other processes share them)")
     print(f"{'backend':<22}{'s/call':>10}{'MP/s':>10}{'vs torch':>10}")
     print(f"{'torch eager ' + torch.__version__:<22}{t_torch:>10.4f}{mp / t_torch:>10.2f}{1.0:>10.2f}")
     import onnxruntime

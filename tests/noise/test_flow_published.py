@@ -120,3 +120,16 @@ def test_iso_outside_range_refused(published_flow):
     x = torch.zeros(1, 4, 4, 4)
     with pytest.raises(NoiseModelError, match="outside the trained range 100..3200"):
         flow.to_latent(x, clean=x, iso=6400.0, camera=0)
+
+
+def test_published_logdet_matches_numerical_jacobian(golden, published_flow):
+    """log-determinant of the released model against slogdet of its float64 Jacobian (3x3 patch)."""
+    flow = copy.deepcopy(published_flow).double()
+    c = _case(golden, 4)
+    noise, clean = c["noise"][:1, :, :3, :3].double(), c["clean"][:1, :, :3, :3].double()
+    kw = dict(clean=clean, iso=c["iso"], camera=c["camera"])
+    with torch.no_grad():
+        _, logdet = flow.to_latent(noise, **kw)
+    jac = torch.autograd.functional.jacobian(lambda x: flow.to_latent(x[None], **kw)[0][0], noise[0])
+    _, ref = torch.linalg.slogdet(jac.reshape(36, 36))
+    assert abs(float(logdet[0]) - float(ref)) <= 1e-9 * abs(float(ref))
