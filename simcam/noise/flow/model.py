@@ -11,6 +11,8 @@ import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from ...errors import NoiseModelError, require_extra
 from . import layers as L
 
@@ -103,9 +105,9 @@ class NoiseFlow(nn.Module):
     def camera_index(self, camera, batch: int):
         """Camera name(s) or index(es) -> int64 tensor (B,); unknown -> NoiseModelError."""
         cams = self.config.cameras
-        if isinstance(camera, str) or isinstance(camera, int):
+        if isinstance(camera, (str, int, np.integer)):
             camera = [camera] * batch
-        if isinstance(camera, torch.Tensor):
+        elif isinstance(camera, (torch.Tensor, np.ndarray)):
             camera = camera.reshape(-1).tolist()
         out = []
         for c in camera:
