@@ -268,9 +268,9 @@ class CouplingNet(nn.Module):
     def __init__(self, c_in: int = 2, width: int = 4, c_out: int = 4):
         super().__init__()
         self.conv1 = nn.Conv2d(c_in, width, 3, padding=1)
-        self.bn1 = nn.BatchNorm2d(width, eps=1e-4, affine=False, momentum=0.01)
+        self.bn1 = nn.BatchNorm2d(width, eps=1e-4, affine=False, momentum=0.1)
         self.conv2 = nn.Conv2d(width, width, 1)
-        self.bn2 = nn.BatchNorm2d(width, eps=1e-4, affine=False, momentum=0.01)
+        self.bn2 = nn.BatchNorm2d(width, eps=1e-4, affine=False, momentum=0.1)
         self.last = nn.Conv2d(width + 1, c_out, 3, padding=0)
         self.logs = nn.Parameter(torch.zeros(c_out))
         nn.init.zeros_(self.last.weight)
