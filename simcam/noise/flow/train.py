@@ -137,7 +137,7 @@ def plot_metrics(csv_path: Path, png_path: Path, reference_nll: float | None = N
     ax[1].set(xlabel="epoch", ylabel="marginal KL (nats)", title="test marginal KL, D(real || model)")
     fig.text(0.5, 0.01, "marginal KL bins: " + KL_BINNING, ha="center", fontsize=7)
     ax[1].legend()
-    fig.tight_layout(rect=(0, 0.04, 1, 1))
+    fig.subplots_adjust(left=0.09, right=0.98, bottom=0.17, top=0.9, wspace=0.3)
     fig.savefig(png_path, dpi=100)
     plt.close(fig)
 
@@ -158,6 +158,7 @@ def train(
     data_init: bool = True,
     progress: bool = True,
     reference_nll=None,
+    plot_every: int = 1,
 ) -> dict:
     """Train a Noise Flow on a patch set; returns the last epoch's metrics.
 
@@ -169,6 +170,8 @@ def train(
         Receives ``last.pt``, ``best.pt``, ``metrics.csv``, ``metrics.png``.
     reference_nll : callable, optional
         ``reference_nll(test_set) -> float``: a known model's test NLL/dim to draw.
+    plot_every : int
+        Redraw ``metrics.png`` every this many epochs (and after the last one).
     """
     from tqdm import tqdm
 
@@ -230,7 +233,8 @@ def train(
             flow.save(out / "best.pt", epoch=epoch, test_nll_per_dim=test_nll)
         flow.save(last, optimizer=opt.state_dict(), epoch=epoch, best_test_nll=best,
                   split=[test_fraction, seed, int(ps["clean"].shape[0])], train_config=asdict(flow.config))
-        plot_metrics(out / "metrics.csv", out / "metrics.png", ref)
+        if epoch % max(1, plot_every) == 0 or epoch == epochs:
+            plot_metrics(out / "metrics.csv", out / "metrics.png", ref)
         if progress:
             tqdm.write(f"epoch {epoch}: train {row['train_nll_per_dim']:.4f} test {test_nll:.4f} nats/dim, "
                        f"marginal KL {kl:.4f}" + (f" (reference {ref:.4f})" if ref is not None else ""))
