@@ -1,0 +1,1 @@
+"""Dataset tools: capture sets, photon transfer, the calibration loop."""

@@ -1,0 +1,534 @@
+"""Residual diagnostics of the calibration loop.
+
+Each diagnostic maps a capture (dark / flat / scene frame stacks in DN) to one
+number. The loop computes it on the measured frames and on frames simulated
+from the current model (same shapes and frame counts) and standardises the
+difference (:func:`discrepancy`). Names, the effect each one points to, and
+the statistic (EMVA 1288 R4.0 sec. 8 for the spatial split, ELD/Wei et al.
+2020 for row noise and Tukey-lambda PPCC):
+
+======================  ==================  =====================================================
+diagnostic              effect              statistic
+======================  ==================  =====================================================
+ptc_curvature           nonlinearity        quadratic / linear coefficient of variance vs mean
+plane_gain_spread       channel_gain        std / mean of the per-CFA-plane photon-transfer slopes
+row_mean_excess         row_noise           var(row means of temporal residual) / (pixel var / W)
+row_spectrum_peak       periodic_pattern    max / median of the (per-frame whitened) periodogram of row means
+col_spectrum_peak       periodic_pattern    same along columns
+col_temporal_excess     (none)              var(column means of temporal residual) / (pixel var / H)
+col_fpn_excess          column_fpn          cov(column means of even- and odd-frame dark mean maps) /
+                                            (map var / H)
+dsnu_excess             dsnu                robust var of the dark mean map (rows/cols removed) /
+                                            (temporal var / n)
+hot_pixel_tail          hot_pixels          fraction of dark-map pixels > 6 robust sigma
+prnu_excess             prnu                (flat map var - dark map var) / signal^2 (pixel part)
+black_offset            black_level_offset  median of dark mean map - declared black (DN)
+frame_mean_jitter       frame_flicker       var of flat frame means / signal^2
+dark_tail_mass          heavy_tail_read     fraction of dark residuals beyond 4 IQR-sigma
+dark_ppcc_lambda        heavy_tail_read     Tukey-lambda shape maximising the PPCC of dark residuals
+code_occupancy          quantization        used / possible integer codes in the central 98 % of darks
+lag1_corr / lag2_corr   spatial_correlation lag-1 / lag-2 autocorrelation inside each CFA plane
+======================  ==================  =====================================================
+
+The temporal residual is a frame minus the per-pixel mean of its sequence,
+with each frame's row and column means removed where a statistic should not
+see row/column noise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats as sst
+
+PLANE_OFFSETS = ((0, 0), (0, 1), (1, 0), (1, 1))
+
+DIAGNOSTIC_EFFECT = {
+    "ptc_curvature": "nonlinearity",
+    "plane_gain_spread": "channel_gain",
+    "row_mean_excess": "row_noise",
+    "row_spectrum_peak": "periodic_pattern",
+    "col_spectrum_peak": "periodic_pattern",
+    "col_temporal_excess": None,
+    "col_fpn_excess": "column_fpn",
+    "dsnu_excess": "dsnu",
+    "hot_pixel_tail": "hot_pixels",
+    "prnu_excess": "prnu",
+    "black_offset": "black_level_offset",
+    "frame_mean_jitter": "frame_flicker",
+    "dark_tail_mass": "heavy_tail_read",
+    "dark_ppcc_lambda": "heavy_tail_read",
+    "code_occupancy": "quantization",
+    "lag1_corr": "spatial_correlation",
+    "lag2_corr": "spatial_correlation",
+}
+DIAGNOSTICS = tuple(DIAGNOSTIC_EFFECT)
+
+#: When the diagnostic on the left is chosen but one on the right is also
+#: significant, the right one is taken first: it is the more specific symptom
+#: of an effect that also inflates the left one.
+PRECEDENCE = {
+    "row_mean_excess": ("row_spectrum_peak",),
+    "col_temporal_excess": ("col_spectrum_peak",),
+    "dsnu_excess": ("hot_pixel_tail",),
+    "col_fpn_excess": ("hot_pixel_tail", "dsnu_excess"),  # per-pixel fixed offsets leak into column means
+    "black_offset": ("hot_pixel_tail", "col_fpn_excess", "dsnu_excess"),
+    "frame_mean_jitter": ("row_spectrum_peak", "row_mean_excess", "col_spectrum_peak"),
+    "plane_gain_spread": ("ptc_curvature",),
+    "dark_tail_mass": ("code_occupancy",),
+    "dark_ppcc_lambda": ("code_occupancy",),
+    "hot_pixel_tail": ("dark_tail_mass", "dark_ppcc_lambda"),
+    "lag1_corr": ("code_occupancy",),
+    "lag2_corr": ("code_occupancy", "lag1_corr"),
+}
+
+
+@dataclass
+class CaptureData:
+    """Frames of one ISO group as the diagnostics see them (DN, float32).
+
+    ``darks``/``flats``: lists of (n, H, W); ``scenes``: list of ((n, H, W), clean or None);
+    ``black_dn`` (2, 2) declared black or None; ``cfa`` pattern or None (mono).
+    """
+
+    darks: list
+    flats: list
+    scenes: list
+    black_dn: np.ndarray | None
+    white_dn: float
+    cfa: str | None
+    cache: dict = field(default_factory=dict)
+
+    # ---- shared intermediates (cached) ---------------------------------
+    def temporal_residuals(self, which: str) -> list[np.ndarray]:
+        """Frame minus per-pixel sequence mean, scaled by sqrt(n/(n-1)) (unit-variance preserving)."""
+        key = ("res", which)
+        if key not in self.cache:
+            seqs = self.darks if which == "dark" else self.flats if which == "flat" else self.darks + self.flats
+            out = []
+            for f in seqs:
+                f64 = f.astype(np.float64)
+                n = f.shape[0]
+                out.append((f64 - f64.mean(0)) * np.sqrt(n / (n - 1)))
+            self.cache[key] = out
+        return self.cache[key]
+
+    def dark_map(self) -> tuple[np.ndarray, float, int] | None:
+        """(mean map over all dark frames, mean temporal variance, frame count)."""
+        if "dmap" not in self.cache:
+            if not self.darks:
+                self.cache["dmap"] = None
+            else:
+                allf = np.concatenate(self.darks).astype(np.float64)
+                m = allf.mean(0)
+                vt = float(np.mean([np.mean(np.var(d.astype(np.float64), axis=0, ddof=1)) for d in self.darks]))
+                self.cache["dmap"] = (m, vt, allf.shape[0])
+        return self.cache["dmap"]
+
+    def flat_map(self) -> tuple[np.ndarray, float, int] | None:
+        """Mean map of the flat with the most frames (the brightest among equals), its temporal
+        variance and frame count."""
+        if "fmap" not in self.cache:
+            if not self.flats:
+                self.cache["fmap"] = None
+            else:
+                f = max(self.flats, key=lambda a: (a.shape[0], float(a.mean()))).astype(np.float64)
+                self.cache["fmap"] = (f.mean(0), float(np.mean(np.var(f, axis=0, ddof=1))), f.shape[0])
+        return self.cache["fmap"]
+
+    def ptc_points(self):
+        """Per plane (mean, temporal var) of each dark and flat sequence (frame means removed)."""
+        if "ptc" not in self.cache:
+            def mv(f):
+                out = []
+                for dy, dx in PLANE_OFFSETS:
+                    p = f[:, dy::2, dx::2].astype(np.float64)
+                    fm = p.mean(axis=(1, 2), keepdims=True)
+                    out.append((float(fm.mean()), float(np.mean(np.var(p - fm, axis=0, ddof=1)))))
+                return np.array(out)
+            self.cache["ptc"] = ([mv(d) for d in self.darks], [mv(f) for f in self.flats])
+        return self.cache["ptc"]
+
+
+def plane_centre(m: np.ndarray) -> np.ndarray:
+    """Subtract each 2x2-site plane's median."""
+    out = m.copy()
+    for dy, dx in PLANE_OFFSETS:
+        out[dy::2, dx::2] -= np.median(out[dy::2, dx::2])
+    return out
+
+
+def robust_sigma(x: np.ndarray) -> float:
+    """1.4826 * MAD (sigma of a Gaussian)."""
+    med = np.median(x)
+    return float(1.4826 * np.median(np.abs(x - med)))
+
+
+def remove_profiles(m: np.ndarray) -> np.ndarray:
+    """Map minus its per-plane median, then minus robust (median) row and column profiles."""
+    r = plane_centre(m)
+    r = r - np.median(r, axis=1, keepdims=True)
+    r = r - np.median(r, axis=0, keepdims=True)
+    return r
+
+
+def _clip_robust(m: np.ndarray, k: float = 5.0) -> np.ndarray:
+    s = robust_sigma(m)
+    return np.clip(m, -k * s, k * s)
+
+
+# ------------------------------------------------------------------ statistics
+
+def ptc_curvature(d: CaptureData):
+    darks, flats = d.ptc_points()
+    if len(flats) < 3:
+        return None
+    pts = np.array(darks + flats)  # (m, 4, 2)
+    mu0 = np.mean([p[:, 0] for p in darks], axis=0) if darks else np.zeros(4)
+    t = []
+    for c in range(4):
+        x = pts[:, c, 0] - mu0[c]
+        y = pts[:, c, 1]
+        c2, c1, _c0 = np.polyfit(x, y, 2)
+        t.append(c2 * x.max() / c1)
+    return float(np.mean(t))
+
+
+def plane_slopes(d: CaptureData) -> np.ndarray | None:
+    darks, flats = d.ptc_points()
+    if len(flats) < 1:
+        return None
+    if darks:
+        mu0 = np.mean([p[:, 0] for p in darks], axis=0)
+        v0 = np.mean([p[:, 1] for p in darks], axis=0)
+        X = np.array([f[:, 0] for f in flats]) - mu0
+        Y = np.array([f[:, 1] for f in flats]) - v0
+        return (X * Y).sum(0) / (X * X).sum(0)
+    if len(flats) < 2:
+        return None
+    return np.array([np.polyfit([f[c, 0] for f in flats], [f[c, 1] for f in flats], 1)[0] for c in range(4)])
+
+
+def plane_gain_spread(d: CaptureData):
+    if d.cfa is None:
+        return None
+    k = plane_slopes(d)
+    return None if k is None else float(np.std(k) / np.mean(k))
+
+
+def _line_means(which: str, axis: int, d: CaptureData) -> list[np.ndarray]:
+    """Per frame, means along ``axis`` of the temporal residual (axis=2: row means)."""
+    key = ("lm", which, axis)
+    if key not in d.cache:
+        d.cache[key] = [r.mean(axis=axis) for r in d.temporal_residuals(which)]
+    return d.cache[key]
+
+
+def _excess(d: CaptureData, axis: int):
+    res = d.temporal_residuals("all")
+    if not res:
+        return None
+    lm = _line_means("all", axis, d)
+    vals = []
+    for r, m in zip(res, lm):
+        npx = r.shape[axis]
+        vals.append(np.var(m, axis=1).mean() / (np.var(r) / npx))
+    return float(np.mean(vals))
+
+
+def row_mean_excess(d):
+    return _excess(d, 2)
+
+
+def col_temporal_excess(d):
+    return _excess(d, 1)
+
+
+def periodogram(d: CaptureData, axis: int) -> np.ndarray | None:
+    lm = _line_means("all", axis, d)
+    if not lm:
+        return None
+    ps = [np.abs(np.fft.rfft(m - m.mean(axis=1, keepdims=True), axis=1)) ** 2 for m in lm]
+    return np.concatenate(ps).mean(0)
+
+
+def whitened_periodogram(d: CaptureData, axis: int) -> np.ndarray | None:
+    """Mean over frames of each frame's periodogram divided by its own median (so dark frames,
+    where a weak pattern stands out, are not drowned by the shot noise of flats)."""
+    key = ("wp", axis)
+    if key not in d.cache:
+        lm = _line_means("all", axis, d)
+        if not lm:
+            d.cache[key] = None
+        else:
+            ps = [np.abs(np.fft.rfft(m - m.mean(axis=1, keepdims=True), axis=1)) ** 2 for m in lm]
+            ps = [p / np.median(p[:, 1:], axis=1, keepdims=True) for p in ps]
+            d.cache[key] = np.concatenate(ps).mean(0)
+    return d.cache[key]
+
+
+def _peak(d, axis):
+    p = whitened_periodogram(d, axis)
+    if p is None:
+        return None
+    p = p[1:]
+    return float(p.max() / np.median(p))
+
+
+def row_spectrum_peak(d):
+    return _peak(d, 2)
+
+
+def col_spectrum_peak(d):
+    return _peak(d, 1)
+
+
+def column_profiles(d: CaptureData):
+    """Column profiles of the mean maps of the even and of the odd frames (darks, else the
+    longest flat): plane-centred, clipped at 5 robust sigma, row means removed. Their covariance
+    sees only the fixed column pattern (temporal column noise is independent between the halves)."""
+    if "colprof" not in d.cache:
+        stacks = d.darks or ([max(d.flats, key=lambda a: (a.shape[0], float(a.mean())))] if d.flats else [])
+        if not stacks:
+            d.cache["colprof"] = None
+        else:
+            allf = np.concatenate(stacks).astype(np.float64)
+            out = []
+            for half in (allf[0::2], allf[1::2]):
+                m = _clip_robust(plane_centre(half.mean(0)))
+                m = m - m.mean(axis=1, keepdims=True)
+                out.append((m.mean(axis=0), float(np.var(m)), m.shape[0]))
+            d.cache["colprof"] = out
+    return d.cache["colprof"]
+
+
+def col_fpn_excess(d: CaptureData):
+    prof = column_profiles(d)
+    if prof is None:
+        return None
+    (ca, va, h), (cb, vb, _) = prof
+    cov = float(np.mean((ca - ca.mean()) * (cb - cb.mean())))
+    return cov / (0.5 * (va + vb) / h)
+
+
+def dsnu_excess(d: CaptureData):
+    dm = d.dark_map()
+    if dm is None:
+        return None
+    m, vt, n = dm
+    r = remove_profiles(m)
+    return float(robust_sigma(r) ** 2 / (vt / n))
+
+
+def hot_pixel_tail(d: CaptureData):
+    dm = d.dark_map()
+    if dm is None:
+        return None
+    r = remove_profiles(dm[0])
+    return float(np.mean(r > 6 * robust_sigma(r)))
+
+
+def prnu_excess(d: CaptureData):
+    fm = d.flat_map()
+    if fm is None:
+        return None
+    m, vt, n = fm
+    sig_f = robust_sigma(remove_profiles(m)) ** 2 - vt / n
+    base = 0.0
+    dm = d.dark_map()
+    level = float(np.mean(m))
+    if dm is not None:
+        base = robust_sigma(remove_profiles(dm[0])) ** 2 - dm[1] / dm[2]
+        level -= float(np.mean(dm[0]))
+    elif d.black_dn is not None:
+        level -= float(np.mean(d.black_dn))
+    return float((sig_f - float(base)) / max(level, 1e-9) ** 2)
+
+
+def black_offset(d: CaptureData):
+    dm = d.dark_map()
+    if dm is None or d.black_dn is None:
+        return None
+    m = dm[0]
+    return float(np.mean([np.median(m[dy::2, dx::2]) - d.black_dn[dy, dx] for dy, dx in PLANE_OFFSETS]))
+
+
+def frame_mean_jitter(d: CaptureData):
+    if not d.flats:
+        return None
+    ref = float(np.mean([x.mean() for x in d.darks])) if d.darks else (
+        float(np.mean(d.black_dn)) if d.black_dn is not None else 0.0)
+    vals = []
+    for f in d.flats:
+        means = f.astype(np.float64).mean(axis=(1, 2))
+        vals.append(np.var(means, ddof=1) / (means.mean() - ref) ** 2)
+    return float(np.mean(vals))
+
+
+def dark_residual_sample(d: CaptureData, max_values: int = 20000) -> np.ndarray | None:
+    """Dark temporal residuals (row and column means of each frame removed), deterministic subsample."""
+    if "dres" not in d.cache:
+        res = d.temporal_residuals("dark")
+        if not res:
+            d.cache["dres"] = None
+        else:
+            parts = []
+            for r in res:
+                r = r - r.mean(axis=2, keepdims=True)
+                r = r - r.mean(axis=1, keepdims=True)
+                parts.append(r.ravel())
+            x = np.concatenate(parts)
+            step = max(1, x.size // max_values)
+            d.cache["dres"] = x[::step][:max_values]
+    return d.cache["dres"]
+
+
+def dark_tail_mass(d):
+    x = dark_residual_sample(d)
+    if x is None:
+        return None
+    q25, q75 = np.percentile(x, [25, 75])
+    s = (q75 - q25) / 1.349
+    return float(np.mean(np.abs(x - np.median(x)) > 4 * s))
+
+
+_PPCC_LAMBDAS = np.linspace(-0.5, 0.5, 41)
+_PPCC_CACHE: dict = {}
+
+
+def _tukey_order_medians(n: int) -> np.ndarray:
+    """(len(lambdas), n) Tukey-lambda quantiles at Filliben's order-statistic medians."""
+    if n not in _PPCC_CACHE:
+        i = np.arange(1, n + 1)
+        m = (i - 0.3175) / (n + 0.365)
+        m[-1] = 0.5 ** (1.0 / n)
+        m[0] = 1 - m[-1]
+        q = np.array([sst.tukeylambda.ppf(m, lam) for lam in _PPCC_LAMBDAS])
+        q = q - q.mean(axis=1, keepdims=True)
+        _PPCC_CACHE[n] = q / np.linalg.norm(q, axis=1, keepdims=True)
+    return _PPCC_CACHE[n]
+
+
+def ppcc_lambda(x: np.ndarray) -> float:
+    """Tukey-lambda shape maximising the probability-plot correlation (Filliben 1975), on a
+    0.025 grid over [-0.5, 0.5] refined by a parabola through the best three points."""
+    xs = np.sort(x)
+    qc = _tukey_order_medians(xs.size)  # centred, unit-norm rows
+    xc = xs - xs.mean()
+    r = np.einsum("ij,j->i", qc, xc) / (float(np.sqrt(np.sum(xc * xc))) + 1e-300)
+    i = int(np.argmax(r))
+    if 0 < i < len(r) - 1:
+        y0, y1, y2 = r[i - 1], r[i], r[i + 1]
+        den = y0 - 2 * y1 + y2
+        off = 0.5 * (y0 - y2) / den if den != 0 else 0.0
+        return float(_PPCC_LAMBDAS[i] + np.clip(off, -1, 1) * (_PPCC_LAMBDAS[1] - _PPCC_LAMBDAS[0]))
+    return float(_PPCC_LAMBDAS[i])
+
+
+def dark_ppcc_lambda(d):
+    x = dark_residual_sample(d, 4000)
+    return None if x is None else ppcc_lambda(x)
+
+
+def code_occupancy(d: CaptureData):
+    src = d.darks or (sorted(d.flats, key=lambda a: float(a.mean()))[:1])
+    if not src:
+        return None
+    v = np.concatenate([s.ravel() for s in src])
+    lo, hi = np.percentile(v, [1, 99])
+    inside = v[(v >= lo) & (v <= hi)]
+    codes = np.unique(np.round(inside))
+    span = codes.max() - codes.min() + 1
+    return float(codes.size / span) if span > 1 else 1.0
+
+
+def _lag_corr(d: CaptureData, lag: int):
+    res = d.temporal_residuals("dark")
+    if not res:
+        return None
+    key = ("lag", lag)
+    if key in d.cache:
+        return d.cache[key]
+    vals = []
+    for r in res:
+        r = r - r.mean(axis=2, keepdims=True)
+        r = r - r.mean(axis=1, keepdims=True)
+        for dy, dx in PLANE_OFFSETS:
+            p = r[:, dy::2, dx::2]
+            den = np.mean(p * p)
+            vals.append(np.mean(p[:, :, lag:] * p[:, :, :-lag]) / den)
+            vals.append(np.mean(p[:, lag:, :] * p[:, :-lag, :]) / den)
+    d.cache[key] = float(np.mean(vals))
+    return d.cache[key]
+
+
+def lag1_corr(d):
+    return _lag_corr(d, 1)
+
+
+def lag2_corr(d):
+    return _lag_corr(d, 2)
+
+
+STATISTICS = {name: globals()[name] for name in DIAGNOSTICS}
+
+#: Smallest meaningful spread of a statistic (a floor for the bootstrap std):
+#: counting statistics cannot resolve less than one pixel / one code.
+def resolution(name: str, d: CaptureData) -> float:
+    if name == "hot_pixel_tail":
+        dm = d.dark_map()
+        return 1.0 / dm[0].size if dm is not None else 0.0
+    if name == "dark_tail_mass":
+        x = dark_residual_sample(d)
+        return 1.0 / x.size if x is not None else 0.0
+    if name == "black_offset":  # one code of one plane of the dark mean map
+        dm = d.dark_map()
+        return 1.0 / (4 * dm[2]) if dm is not None else 0.0
+    if name == "code_occupancy":  # one code of the span
+        v = code_occupancy(d)
+        src = d.darks or d.flats
+        span = float(np.percentile(src[0], 99) - np.percentile(src[0], 1)) + 1 if src else 1.0
+        return 1.0 / max(span, 1.0)
+    return 1e-12
+
+
+def compute_all(d: CaptureData, names=DIAGNOSTICS) -> dict:
+    """{name: value or None (not applicable)}."""
+    return {n: STATISTICS[n](d) for n in names}
+
+
+@dataclass
+class Discrepancy:
+    """Standardised discrepancy of a diagnostic: z = (T_data - mean_sim) / (sd_sim * sqrt(1 + 1/R));
+    under the model z follows Student t with R - 1 degrees of freedom (predictive interval of a
+    new draw from R simulated ones), giving the two-sided p-value."""
+
+    name: str
+    value: float
+    sim_mean: float
+    sim_sd: float
+    z: float
+    p: float
+    significant: bool = False
+
+
+def discrepancy(name: str, value: float, sims: list[float], floor: float) -> Discrepancy:
+    s = np.asarray(sims, dtype=np.float64)
+    R = s.size
+    sd = max(float(s.std(ddof=1)), floor)
+    z = (value - float(s.mean())) / (sd * np.sqrt(1 + 1 / R))
+    p = float(2 * sst.t.sf(abs(z), R - 1))
+    return Discrepancy(name, float(value), float(s.mean()), sd, float(z), p)
+
+
+def holm(discs: list[Discrepancy], alpha: float) -> list[Discrepancy]:
+    """Mark significance by Holm's step-down procedure at family-wise level ``alpha``."""
+    order = sorted(discs, key=lambda x: x.p)
+    m = len(order)
+    for k, dsc in enumerate(order):
+        if dsc.p <= alpha / (m - k):
+            dsc.significant = True
+        else:
+            break
+    return discs

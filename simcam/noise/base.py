@@ -1,0 +1,289 @@
+"""The NoiseModel contract, the noise condition, the model registry and shared helpers.
+
+A noise model is a pydantic model whose fields are its parameters (so the
+model *is* its profile entry: ``to_entry()`` / :func:`model_from_entry`), with
+
+``sample(clean, cond, rng, *, chunk_rows=None) -> noisy``
+    noisy normalised raw (float32, H x W) for clean normalised raw;
+``log_prob(noisy, clean, cond) -> per-pixel log-likelihood`` in nats (float64),
+    where the density is tractable (DESIGN.md section 2).
+
+Per-CFA-site parameters are a float (all sites) or a list of 4 floats in the
+packed site order (0,0), (0,1), (1,0), (1,1) of :mod:`simcam.cfa`.
+
+Randomness and tiling. ``sample`` draws a 128-bit *frame key* from ``rng``;
+rows are processed in fixed blocks of :data:`BLOCK_ROWS` rows and block ``b``
+draws from ``SeedSequence(key + [b])``. The noise therefore depends only on
+(key, block index, clean values): any ``chunk_rows`` (rounded up to a multiple of
+``BLOCK_ROWS``) gives byte-identical output, and :meth:`NoiseModel.sample_rows`
+lets callers produce any row range of a frame on its own.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar, Union
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, ValidationError
+
+from ..cfa import check_pattern
+from ..errors import NoiseModelError, SimcamError
+
+#: rows per independently seeded block (even, so the CFA phase is the same in every block).
+BLOCK_ROWS = 32
+#: target elements per kernel call inside a block (kernels reuse workspace
+#: buffers of this size, see kernels.py).
+SUB_ELEMENTS = 131072
+
+
+def sub_rows(width: int) -> int:
+    """Rows per kernel call inside a block (even; depends only on the width)."""
+    r = max(2, (SUB_ELEMENTS // max(int(width), 1)) // 2 * 2)
+    return min(r, BLOCK_ROWS)
+
+SiteParam = Union[float, list[float]]
+
+_MODELS: dict[str, type["NoiseModel"]] = {}
+
+
+@dataclass(frozen=True)
+class NoiseCondition:
+    """What a noise model is conditioned on besides the clean signal.
+
+    Attributes
+    ----------
+    iso : float or None
+        ISO speed of the capture.
+    camera : str or None
+        Camera id (profile key).
+    cfa : str or None
+        2x2 Bayer pattern of the mosaic (``"RGGB"``...); None for a mosaic of
+        unknown layout (then only site-independent parameters can be used).
+    source : str
+        Where the data came from (for error messages).
+    """
+
+    iso: float | None = None
+    camera: str | None = None
+    cfa: str | None = "RGGB"
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        if self.cfa is not None:
+            object.__setattr__(self, "cfa", check_pattern(self.cfa, where=f"{self.source or 'cond'}: cfa"))
+
+
+class NoiseModel(BaseModel):
+    """Base of parametric noise models (see module docstring)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    type: str
+    #: False for models whose log_prob raises (documented per model).
+    tractable: ClassVar[bool] = True
+
+    # -- serialisation ----------------------------------------------------
+    def to_entry(self) -> dict[str, Any]:
+        """The profile entry (JSON-compatible dict, ``type`` first)."""
+        return self.model_dump(mode="json")
+
+    @classmethod
+    def from_entry(cls, entry: dict[str, Any], *, where: str = "model") -> "NoiseModel":
+        return model_from_entry(entry, where=where)
+
+    # -- contract ---------------------------------------------------------
+    def sample(self, clean: np.ndarray, cond: NoiseCondition, rng: np.random.Generator, *,
+               chunk_rows: int | None = None, threads: int = 1) -> np.ndarray:
+        """Noisy normalised raw for ``clean`` (float32 H x W), drawn from ``rng``.
+
+        ``chunk_rows`` only bounds the rows processed per call and ``threads``
+        samples row blocks in parallel; the result is byte-identical for every
+        value of either (see module docstring).
+        """
+        clean = check_clean(clean, where=f"{cond.source or 'clean'}")
+        self.check_cond(cond, clean.shape)
+        key = frame_key(rng)
+        h = clean.shape[0]
+        step = h if not chunk_rows else max(BLOCK_ROWS, -(-int(chunk_rows) // BLOCK_ROWS) * BLOCK_ROWS)
+        out = np.empty(clean.shape, dtype=np.float32)
+        for r0 in range(0, h, step):
+            self.sample_rows(clean[r0:r0 + step], cond, key, r0, out=out[r0:r0 + step], threads=threads)
+        return out
+
+    def sample_rows(self, clean_rows: np.ndarray, cond: NoiseCondition, key: np.ndarray,
+                    row0: int, *, out: np.ndarray | None = None, threads: int = 1) -> np.ndarray:
+        """Rows ``row0 ...`` of the frame sampled with frame key ``key`` (row0 % BLOCK_ROWS == 0).
+
+        ``out`` (float32, shape of ``clean_rows``) receives the result when
+        given; ``threads > 1`` processes row blocks on a thread pool (numpy
+        releases the GIL in its kernels; each block has its own generator and
+        rows, so the bytes do not depend on it).
+        """
+        if row0 % BLOCK_ROWS:
+            raise NoiseModelError(f"sample_rows: row0 must be a multiple of {BLOCK_ROWS}, got {row0}")
+        if out is None:
+            out = np.empty(clean_rows.shape, dtype=np.float32)
+        h = clean_rows.shape[0]
+        sub = sub_rows(clean_rows.shape[1])
+
+        def block(r: int) -> None:
+            rng = block_rng(key, (row0 + r) // BLOCK_ROWS)
+            for s in range(r, min(r + BLOCK_ROWS, h), sub):
+                e = min(s + sub, r + BLOCK_ROWS, h)
+                self._sample_block(clean_rows[s:e], cond, rng, row0 + s, out[s:e])
+
+        starts = range(0, h, BLOCK_ROWS)
+        if threads and threads > 1 and len(starts) > 1:
+            from concurrent.futures import ThreadPoolExecutor
+
+            with ThreadPoolExecutor(max_workers=int(threads)) as pool:
+                list(pool.map(block, starts))
+        else:
+            for r in starts:
+                block(r)
+        return out
+
+    def _sample_block(self, clean: np.ndarray, cond: NoiseCondition, rng: np.random.Generator,
+                      row0: int, out: np.ndarray) -> None:
+        """Fill ``out`` (float32, shape of ``clean``) with noisy values for these rows."""
+        raise NotImplementedError
+
+    def log_prob(self, noisy: np.ndarray, clean: np.ndarray, cond: NoiseCondition) -> np.ndarray:
+        """Per-pixel log-likelihood (nats, float64) of ``noisy`` given ``clean``."""
+        raise NoiseModelError(f"model {self.type!r}: log_prob is not tractable")
+
+    def variance(self, clean: np.ndarray, cond: NoiseCondition) -> np.ndarray:
+        """Theoretical per-pixel noise variance for ``clean`` (normalised raw^2)."""
+        raise NoiseModelError(f"model {self.type!r}: no closed-form variance")
+
+    def check_cond(self, cond: NoiseCondition, shape: tuple[int, ...]) -> None:
+        """Raise if per-site parameters are used without a known CFA."""
+        if cond.cfa is None and self._has_site_params():
+            raise NoiseModelError(
+                f"{cond.source or 'frame'}: cfa: model {self.type!r} has per-CFA-site parameters but the frame's CFA is unknown")
+
+    def _has_site_params(self) -> bool:
+        for name in type(self).model_fields:
+            v = getattr(self, name)
+            if isinstance(v, list) and len(v) == 4 and all(isinstance(x, (int, float)) for x in v):
+                return True
+        return False
+
+
+# -- registry -------------------------------------------------------------
+
+def register_model(cls: type[NoiseModel]) -> type[NoiseModel]:
+    """Class decorator: register a model under its ``type`` literal default."""
+    key = cls.model_fields["type"].default
+    if not isinstance(key, str):
+        raise TypeError(f"{cls.__name__}: field 'type' needs a string default")
+    if key in _MODELS and _MODELS[key] is not cls:
+        raise TypeError(f"noise model type {key!r} registered twice")
+    _MODELS[key] = cls
+    return cls
+
+
+def model_types() -> dict[str, type[NoiseModel]]:
+    """All registered model classes by ``type`` name."""
+    _load_builtin()
+    return dict(_MODELS)
+
+
+def _load_builtin() -> None:
+    from . import clipping, composite, gaussian, nlf, poisson_gaussian, poisson_mixture  # noqa: F401
+
+
+def model_from_entry(entry: Any, *, where: str = "model") -> NoiseModel:
+    """Build a model from its profile entry ``{type: ..., **params}`` or raise NoiseModelError."""
+    _load_builtin()
+    if isinstance(entry, NoiseModel):
+        return entry
+    if not isinstance(entry, dict) or "type" not in entry:
+        raise NoiseModelError(f"{where}: expected a mapping with a 'type' key, got {entry!r}")
+    cls = _MODELS.get(entry["type"])
+    if cls is None:
+        raise NoiseModelError(f"{where}.type: unknown noise model {entry['type']!r}; expected one of {', '.join(sorted(_MODELS))}")
+    try:
+        return cls.model_validate(entry)
+    except ValidationError as exc:
+        raise NoiseModelError(f"{where} ({entry['type']}): {describe_validation_error(exc)}") from None
+    except SimcamError as exc:
+        raise NoiseModelError(f"{where} ({entry['type']}): {exc}") from None
+
+
+def describe_validation_error(exc: ValidationError) -> str:
+    err = exc.errors()[0]
+    loc = ".".join(str(p) for p in err["loc"]) or "(parameters)"
+    if err["type"] == "extra_forbidden":
+        return f"{loc}: unknown parameter (value {err.get('input')!r})"
+    return f"{loc}: {err['msg']}, got {err.get('input')!r}"
+
+
+# -- randomness -------------------------------------------------------------
+
+def frame_key(rng: np.random.Generator) -> np.ndarray:
+    """128 bits drawn from ``rng`` that seed every block of one frame."""
+    return rng.integers(0, 2**32, size=4, dtype=np.uint32)
+
+
+def block_rng(key: np.ndarray, block: int, stream: int = 0) -> np.random.Generator:
+    """Generator of row block ``block`` (``stream`` separates independent uses)."""
+    return np.random.Generator(np.random.PCG64(np.random.SeedSequence([int(x) for x in key] + [int(stream), int(block)])))
+
+
+# -- validation and per-site parameters ---------------------------------------
+
+def check_clean(clean: Any, *, where: str = "clean") -> np.ndarray:
+    """float32 H x W clean normalised raw, finite and >= 0, or NoiseModelError."""
+    a = np.asarray(clean)
+    if a.ndim != 2:
+        raise NoiseModelError(f"{where}: expected an H x W mosaic, got shape {a.shape}")
+    if a.dtype != np.float32:
+        a = a.astype(np.float32)
+    if a.size and not np.isfinite(a).all():
+        bad = int(np.size(a) - np.count_nonzero(np.isfinite(a)))
+        raise NoiseModelError(f"{where}: expected finite clean values, got {bad} NaN/inf pixel(s)")
+    if a.size and a.min() < 0:
+        raise NoiseModelError(
+            f"{where}: expected clean normalised raw >= 0 (an expected signal cannot be negative), got min {float(a.min()):.6g}")
+    return a
+
+
+def check_same_shape(noisy: Any, clean: np.ndarray, *, where: str = "noisy") -> np.ndarray:
+    n = np.asarray(noisy)
+    if n.shape != clean.shape:
+        raise NoiseModelError(f"{where}: expected the clean image's shape {clean.shape}, got {n.shape}")
+    return n
+
+
+def site_values(value: SiteParam, *, name: str) -> np.ndarray:
+    """A per-site parameter as 4 float64 values (site order (0,0), (0,1), (1,0), (1,1))."""
+    v = np.atleast_1d(np.asarray(value, dtype=np.float64))
+    if v.size == 1:
+        return np.repeat(v, 4)
+    if v.size != 4:
+        raise NoiseModelError(f"{name}: expected a float or 4 per-site values, got {value!r}")
+    return v
+
+
+def site_map(value: SiteParam, shape: tuple[int, int], row0: int = 0, *, name: str = "param",
+             dtype=np.float32) -> np.ndarray | np.floating:
+    """The per-pixel map of a per-site parameter (a scalar when all sites agree)."""
+    v = site_values(value, name=name)
+    if np.all(v == v[0]):
+        return dtype(v[0])
+    h, w = shape
+    cell = v.reshape(2, 2).astype(dtype)
+    rows = cell[(row0 + np.arange(h)) % 2]  # h x 2
+    return np.tile(rows, (1, (w + 1) // 2))[:, :w]
+
+
+def validate_site_param(value: Any, name: str, *, minimum: float | None = 0.0) -> SiteParam:
+    """pydantic helper: float or 4 floats, all >= ``minimum``."""
+    vals = site_values(value, name=name)
+    if not np.isfinite(vals).all():
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    if minimum is not None and (vals < minimum).any():
+        raise ValueError(f"{name} must be >= {minimum}, got {value!r}")
+    return value

@@ -1,0 +1,144 @@
+"""Effect contract and registry.
+
+An effect is a pydantic model (its profile entry) with a ``stage``:
+
+``"signal"``
+    acts on the expected signal before the base noise model (PRNU, channel
+    gain, frame flicker, nonlinearity);
+``"readout"``
+    acts on the noisy value after the base model (offsets, row/column noise,
+    heavy-tailed read noise, defects, crosstalk, quantization).
+
+Randomness comes in two kinds. ``fixed(shape, rng)`` draws the *fixed pattern*
+(the same for every frame of one sensor): the composite model gives it a
+generator seeded by ``SeedSequence([sensor_seed, crc32(type), occurrence])``.
+``frame(shape, rng)`` draws per-frame quantities (row offsets, flicker gain)
+from the frame key. Per-pixel, per-frame randomness (heavy-tailed read noise)
+draws row block by row block (``ctx.block_rng(b)``), so it is independent of
+tiling, like the base models.
+
+``logprob_role`` says how ``log_prob`` of a composite sees the effect:
+``"signal"`` (a deterministic transform of the signal, given the fixed
+pattern), ``"offset"`` (a deterministic additive offset), or ``None`` (the
+effect makes the likelihood intractable: the composite refuses).
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass, field
+from typing import Any, Callable, ClassVar, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, ValidationError
+
+from ...errors import NoiseModelError, SimcamError
+from ..base import BLOCK_ROWS, block_rng, describe_validation_error, site_map, site_values
+
+EFFECT_NAMES = ("row_noise", "column_fpn", "dsnu", "prnu", "hot_pixels", "heavy_tail_read", "quantization",
+                "spatial_correlation", "periodic_pattern", "black_level_offset", "frame_flicker", "nonlinearity",
+                "channel_gain")
+
+_EFFECTS: dict[str, type["Effect"]] = {}
+
+
+@dataclass
+class EffectContext:
+    """What an effect sees when applied to one frame."""
+
+    cfa: str | None
+    key: np.ndarray | None  # frame key (None in log_prob: per-frame draws unavailable)
+    stream: int  # separates this effect's block streams from the base model's
+    fixed: dict[str, Any] = field(default_factory=dict)
+    frame: dict[str, Any] = field(default_factory=dict)
+    signal: np.ndarray | None = None  # expected signal after the signal-stage effects
+
+    def block_rng(self, block: int) -> np.random.Generator:
+        if self.key is None:
+            raise NoiseModelError("effect needs per-frame randomness but no frame key was given")
+        return block_rng(self.key, block, stream=self.stream)
+
+
+class Effect(BaseModel):
+    """Base class of effects (see module docstring)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    type: str
+    stage: ClassVar[Literal["signal", "readout"]] = "readout"
+    logprob_role: ClassVar[str | None] = None
+
+    def to_entry(self) -> dict[str, Any]:
+        return self.model_dump(mode="json")
+
+    @classmethod
+    def from_entry(cls, entry: dict[str, Any], *, where: str = "effect") -> "Effect":
+        return effect_from_entry(entry, where=where)
+
+    def fixed(self, shape: tuple[int, int], rng: np.random.Generator) -> dict[str, Any]:
+        """Fixed-pattern draw (sensor seed); empty for effects without one."""
+        return {}
+
+    def frame(self, shape: tuple[int, int], rng: np.random.Generator) -> dict[str, Any]:
+        """Per-frame draw; empty for effects without one."""
+        return {}
+
+    def apply(self, x: np.ndarray, ctx: EffectContext) -> np.ndarray:
+        """Return the transformed float32 array (may work in place on ``x``)."""
+        raise NotImplementedError
+
+    def role(self) -> str | None:
+        """How a composite's ``log_prob`` treats this effect (see module docstring)."""
+        return self.logprob_role
+
+    def sensor_stream(self) -> int:
+        return zlib.crc32(self.type.encode())
+
+
+def register_effect(cls: type[Effect]) -> type[Effect]:
+    key = cls.model_fields["type"].default
+    if key not in EFFECT_NAMES:
+        raise TypeError(f"effect {key!r} is not one of the documented names {EFFECT_NAMES}")
+    _EFFECTS[key] = cls
+    return cls
+
+
+def _load() -> None:
+    from . import correlation, defects, fixed_pattern, response, temporal  # noqa: F401
+
+
+def effect_types() -> dict[str, type[Effect]]:
+    _load()
+    return dict(_EFFECTS)
+
+
+def effect_from_entry(entry: Any, *, where: str = "effect") -> Effect:
+    _load()
+    if isinstance(entry, Effect):
+        return entry
+    if not isinstance(entry, dict) or "type" not in entry:
+        raise NoiseModelError(f"{where}: expected a mapping with a 'type' key, got {entry!r}")
+    cls = _EFFECTS.get(entry["type"])
+    if cls is None:
+        raise NoiseModelError(f"{where}.type: unknown effect {entry['type']!r}; expected one of {', '.join(EFFECT_NAMES)}")
+    try:
+        return cls.model_validate(entry)
+    except ValidationError as exc:
+        raise NoiseModelError(f"{where} ({entry['type']}): {describe_validation_error(exc)}") from None
+    except SimcamError as exc:
+        raise NoiseModelError(f"{where} ({entry['type']}): {exc}") from None
+
+
+def per_block(x: np.ndarray, ctx: EffectContext, fn: Callable[[np.ndarray, np.random.Generator], None]) -> None:
+    """Call ``fn(rows_view, rng)`` on each BLOCK_ROWS row block of ``x`` (full frame, row 0 first)."""
+    for r in range(0, x.shape[0], BLOCK_ROWS):
+        fn(x[r:r + BLOCK_ROWS], ctx.block_rng(r // BLOCK_ROWS))
+
+
+def site_array(value, shape, *, name: str) -> np.ndarray | np.floating:
+    """Per-site parameter map for a full frame (row 0 = CFA row 0)."""
+    return site_map(value, shape, 0, name=name)
+
+
+__all__ = ["Effect", "EffectContext", "EFFECT_NAMES", "register_effect", "effect_types", "effect_from_entry",
+           "per_block", "site_array", "site_values"]

@@ -1,0 +1,109 @@
+"""Per-frame random effects: ``row_noise``, ``heavy_tail_read``, ``periodic_pattern``, ``frame_flicker``.
+
+Units: normalised raw for offsets, dimensionless for gains.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from pydantic import Field
+
+from .base import Effect, per_block, register_effect
+
+
+@register_effect
+class RowNoise(Effect):
+    """Per-frame, per-row offset ~ N(0, sigma^2) (normalised raw): horizontal banding."""
+
+    type: Literal["row_noise"] = "row_noise"
+    sigma: float = Field(ge=0)
+
+    def frame(self, shape, rng):
+        return {"row": (self.sigma * rng.standard_normal(shape[0])).astype(np.float32)}
+
+    def apply(self, x, ctx):
+        x += ctx.frame["row"][: x.shape[0], None]
+        return x
+
+
+def tukey_lambda_ppf(u: np.ndarray, lam: float) -> np.ndarray:
+    """Quantile of the standard Tukey-lambda law: ``(u^lam - (1-u)^lam) / lam``, logistic at lam = 0.
+
+    Reference: Joiner & Rosenblatt (1971), doi:10.1080/01621459.1971.10482270.
+    """
+    u = np.asarray(u, dtype=np.float64)
+    if lam == 0:
+        return np.log(u) - np.log1p(-u)
+    return (u**lam - (1.0 - u) ** lam) / lam
+
+
+@register_effect
+class HeavyTailRead(Effect):
+    """Heavy-tailed read noise: per-pixel, per-frame ``scale * TukeyLambda(lam)`` added.
+
+    ``lam`` is the Tukey-lambda shape (< 0.14 heavier tails than Gaussian,
+    ~0.14 near-Gaussian, 0 logistic; Wei et al. 2020 "A physics-based noise
+    formation model", doi:10.1109/CVPR42600.2020.00283, fit lam around -0.2..0.1
+    on read noise); ``scale`` in normalised raw.
+    """
+
+    type: Literal["heavy_tail_read"] = "heavy_tail_read"
+    lam: float = Field(ge=-0.5, le=1.0)
+    scale: float = Field(ge=0)
+
+    def apply(self, x, ctx):
+        def one(rows, rng):
+            u = rng.random(rows.shape)
+            u = np.clip(u, 1e-300, None)  # (0, 1)
+            rows += (self.scale * tukey_lambda_ppf(u, self.lam)).astype(np.float32)
+
+        per_block(x, ctx, one)
+        return x
+
+
+@register_effect
+class PeriodicPattern(Effect):
+    """Sinusoidal banding ``amplitude * sin(2 pi i / period_px + phase)`` added (normalised raw).
+
+    ``axis: rows`` varies with the row index (horizontal bands), ``columns``
+    with the column index. ``random_phase`` draws the phase per frame
+    (uniform), otherwise ``phase`` (radians) is fixed.
+    """
+
+    type: Literal["periodic_pattern"] = "periodic_pattern"
+    amplitude: float = Field(ge=0)
+    period_px: float = Field(gt=0)
+    axis: Literal["rows", "columns"] = "rows"
+    random_phase: bool = True
+    phase: float = 0.0
+
+    def role(self):
+        return None if self.random_phase else "offset"
+
+    def frame(self, shape, rng):
+        return {"phase": float(rng.uniform(0, 2 * np.pi)) if self.random_phase else self.phase}
+
+    def apply(self, x, ctx):
+        phase = ctx.frame.get("phase", self.phase) if ctx.frame else self.phase
+        n = x.shape[0] if self.axis == "rows" else x.shape[1]
+        wave = (self.amplitude * np.sin(2 * np.pi * np.arange(n) / self.period_px + phase)).astype(np.float32)
+        x += wave[:, None] if self.axis == "rows" else wave[None, :]
+        return x
+
+
+@register_effect
+class FrameFlicker(Effect):
+    """Per-frame illumination gain ``g ~ N(1, sigma^2)`` on the signal (dimensionless ``sigma``)."""
+
+    type: Literal["frame_flicker"] = "frame_flicker"
+    sigma: float = Field(ge=0, lt=0.3)
+    stage = "signal"
+
+    def frame(self, shape, rng):
+        return {"gain": float(max(0.0, 1.0 + self.sigma * rng.standard_normal()))}
+
+    def apply(self, x, ctx):
+        x *= np.float32(ctx.frame["gain"])
+        return x

@@ -1,0 +1,226 @@
+"""Test-owned hidden-effect sensor generator for the ``simcam loop`` tests.
+
+Plain numpy; it deliberately does NOT import simcam's noise code, so the loop
+is tested against an independent implementation of the physics.
+
+Signal chain (all in DN, per pixel ``p`` of frame ``f``; EMVA 1288 R4.0 sec. 2,
+seed eq. 3.6 for the Poisson-Gaussian core)::
+
+    e      ~ Poisson(mu_e[p] * (1 + prnu[p]) * (1 + flicker[f]))        photo-electrons
+    x      = K * g[c] * e + read[f, p] + row[f, r] + periodic[f, r]     DN, linear
+    y      = x + c_nl * x**2 / (white - black)                          compressive response
+    v      = black + offset + dsnu[p] + col[c] + hot[p] + y
+    frame  = clip(round(v / q) * q, 0, 2**bits - 1)                     ADC
+
+* ``K`` system gain (DN/e-), ``g[c]`` per-CFA-site gain (``channel_gain``).
+* ``read`` Gaussian N(0, read_dn^2), or Tukey-lambda(lam) scaled to the same
+  variance (``heavy_tail_read``; ELD, Wei et al. CVPR 2020), optionally
+  filtered inside each CFA plane by the separable kernel [a, 1, a]
+  (``spatial_correlation``), renormalised to keep its variance.
+* ``row`` N(0, sigma^2) per frame and row (``row_noise``); ``periodic`` a sine
+  along the row index with a random phase per frame (``periodic_pattern``).
+* Fixed patterns are drawn once per sensor (``sensor_seed``) and shared by all
+  sequences: ``dsnu`` N(0, s^2) per pixel, ``col`` N(0, s^2) per column
+  (``column_fpn``), ``prnu`` N(0, s^2) per pixel, ``hot`` a set of pixels with
+  an exponential extra offset (``hot_pixels``).
+* ``flicker`` N(0, s^2) per frame, only where there is light (``frame_flicker``).
+* ``column_noise`` N(0, s^2) per frame and column: deliberately *outside* simcam's effect
+  vocabulary (temporal column noise), to test that the loop reports it as unexplained.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+EFFECTS = (
+    "row_noise", "column_fpn", "dsnu", "prnu", "hot_pixels", "heavy_tail_read", "quantization",
+    "spatial_correlation", "periodic_pattern", "black_level_offset", "frame_flicker",
+    "nonlinearity", "channel_gain",
+)
+
+#: Parameters the tests use for each effect alone (chosen well above the
+#: detection floor of a 64x64, 12-frame capture set; units in the names).
+DEFAULT_EFFECTS = {
+    "row_noise": {"sigma_dn": 1.5},
+    "column_fpn": {"sigma_dn": 1.5},
+    "dsnu": {"sigma_dn": 2.5},
+    "prnu": {"sigma": 0.02},
+    "hot_pixels": {"fraction": 0.004, "mean_dn": 60.0},
+    "heavy_tail_read": {"lam": -0.25},
+    "quantization": {"step_dn": 4},
+    "spatial_correlation": {"a": 0.35},
+    "periodic_pattern": {"amplitude_dn": 2.0, "period_px": 8.0},
+    "black_level_offset": {"offset_dn": 6.0},
+    "frame_flicker": {"sigma": 0.01},
+    "nonlinearity": {"c": -0.12},
+    "channel_gain": {"gains": [1.15, 1.0, 1.0, 0.85]},
+}
+
+
+@dataclass
+class SensorSpec:
+    """Base Poisson-Gaussian sensor + hidden effects (see the module docstring)."""
+
+    height: int = 64
+    width: int = 64
+    bits: int = 10
+    K: float = 2.0  # DN / e-
+    read_dn: float = 3.0
+    black_dn: float = 64.0
+    cfa: str | None = "RGGB"
+    iso: int = 800
+    effects: dict = field(default_factory=dict)
+    sensor_seed: int = 1
+
+    @property
+    def white_dn(self) -> float:
+        return float(2 ** self.bits - 1)
+
+
+def _tukey(lam: float, size, rng) -> np.ndarray:
+    """Tukey-lambda quantile transform Q(u) = (u^lam - (1-u)^lam) / lam."""
+    u = rng.random(size)
+    u = np.clip(u, 1e-12, 1 - 1e-12)
+    if abs(lam) < 1e-9:
+        return np.log(u / (1 - u))
+    return (u ** lam - (1 - u) ** lam) / lam
+
+
+def _tukey_var(lam: float) -> float:
+    from math import gamma
+
+    if abs(lam) < 1e-9:
+        return np.pi ** 2 / 3
+    return 2.0 / lam ** 2 * (1.0 / (1 + 2 * lam) - gamma(lam + 1) ** 2 / gamma(2 * lam + 2))
+
+
+def _plane_filter(noise: np.ndarray, a: float) -> np.ndarray:
+    """Separable [a, 1, a] filter inside each 2x2 CFA plane (circular), unit variance gain."""
+    out = noise.copy()
+    for axis in (-2, -1):
+        out = out + a * (np.roll(out, 2, axis=axis) + np.roll(out, -2, axis=axis))
+    return out / (1 + 2 * a * a)
+
+
+class HiddenEffectSensor:
+    """A sensor whose fixed patterns are drawn once from ``spec.sensor_seed``."""
+
+    def __init__(self, spec: SensorSpec):
+        self.spec = spec
+        eff = spec.effects
+        rng = np.random.default_rng(spec.sensor_seed)
+        h, w = spec.height, spec.width
+        self.offset = np.zeros((h, w))
+        if "dsnu" in eff:
+            self.offset += rng.normal(0, eff["dsnu"]["sigma_dn"], (h, w))
+        if "column_fpn" in eff:
+            self.offset += rng.normal(0, eff["column_fpn"]["sigma_dn"], (1, w))
+        if "hot_pixels" in eff:
+            p = eff["hot_pixels"]
+            hot = rng.random((h, w)) < p["fraction"]
+            self.offset += hot * rng.exponential(p["mean_dn"], (h, w))
+            self.hot_mask = hot
+        self.prnu = np.ones((h, w))
+        if "prnu" in eff:
+            self.prnu += rng.normal(0, eff["prnu"]["sigma"], (h, w))
+        self.gain = np.ones((h, w))
+        if "channel_gain" in eff:
+            g = eff["channel_gain"]["gains"]
+            for k, (dy, dx) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):
+                self.gain[dy::2, dx::2] = g[k]
+
+    def frames(self, mu_e: np.ndarray | float, n_frames: int, rng) -> np.ndarray:
+        """``n_frames`` x H x W frames in DN (float32 holding integer codes)."""
+        s, eff = self.spec, self.spec.effects
+        h, w = s.height, s.width
+        mu = np.broadcast_to(np.asarray(mu_e, dtype=np.float64), (h, w)) * self.prnu
+        out = np.empty((n_frames, h, w), dtype=np.float32)
+        for f in range(n_frames):
+            lam = mu
+            if "frame_flicker" in eff:
+                lam = lam * (1 + rng.normal(0, eff["frame_flicker"]["sigma"]))
+            x = s.K * self.gain * rng.poisson(np.maximum(lam, 0))
+            if "heavy_tail_read" in eff:
+                t = eff["heavy_tail_read"]["lam"]
+                read = _tukey(t, (h, w), rng) / np.sqrt(_tukey_var(t))
+            else:
+                read = rng.standard_normal((h, w))
+            if "spatial_correlation" in eff:
+                read = _plane_filter(read, eff["spatial_correlation"]["a"])
+            x = x + s.read_dn * read
+            if "row_noise" in eff:
+                x = x + rng.normal(0, eff["row_noise"]["sigma_dn"], (h, 1))
+            if "column_noise" in eff:  # NOT in simcam's vocabulary: tests the 'unexplained' path
+                x = x + rng.normal(0, eff["column_noise"]["sigma_dn"], (1, w))
+            if "periodic_pattern" in eff:
+                p = eff["periodic_pattern"]
+                r = np.arange(h)[:, None]
+                x = x + p["amplitude_dn"] * np.sin(2 * np.pi * r / p["period_px"] + rng.uniform(0, 2 * np.pi))
+            if "nonlinearity" in eff:
+                x = x + eff["nonlinearity"]["c"] * x ** 2 / (s.white_dn - s.black_dn)
+            v = s.black_dn + eff.get("black_level_offset", {}).get("offset_dn", 0.0) + self.offset + x
+            q = eff.get("quantization", {}).get("step_dn", 1)
+            out[f] = np.clip(np.round(v / q) * q, 0, s.white_dn)
+        return out
+
+
+def capture_set(spec: SensorSpec, *, n_frames: int = 12, flat_levels=(0.15, 0.35, 0.55, 0.75),
+                colour=(0.8, 1.0, 1.0, 0.7), seed: int = 7, scene: bool = False) -> dict:
+    """A capture set ``{name: (kind, frames, meta)}``: one dark and several flat sequences.
+
+    ``flat_levels`` are mean signals as fractions of (white - black); ``colour``
+    the relative flux on the four CFA sites.
+    """
+    sensor = HiddenEffectSensor(spec)
+    rng = np.random.default_rng(seed)
+    full = spec.white_dn - spec.black_dn
+    site = np.ones((spec.height, spec.width))
+    if spec.cfa:
+        for k, (dy, dx) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):
+            site[dy::2, dx::2] = colour[k]
+    meta = {"iso": spec.iso, "cfa": spec.cfa, "black_level": spec.black_dn, "white_level": spec.white_dn}
+    out = {"dark": ("dark", sensor.frames(0.0, n_frames, rng), dict(meta, exposure_s=0.01))}
+    for i, lev in enumerate(flat_levels):
+        mu_e = lev * full / spec.K * site
+        out[f"flat_{i}"] = ("flat", sensor.frames(mu_e, n_frames, rng), dict(meta, exposure_s=0.01 * (i + 1)))
+    if scene:
+        yy, xx = np.mgrid[0:spec.height, 0:spec.width]
+        mu_e = (0.1 + 0.5 * xx / spec.width) * full / spec.K * site
+        out["scene"] = ("scene", sensor.frames(mu_e, n_frames, rng), dict(meta, exposure_s=0.02))
+    return out
+
+
+def write_capture_set(root: Path, captures: dict) -> Path:
+    """Write each sequence as ``root/<name>/frame_NNN.npy`` + ``sequence.yaml``."""
+    root = Path(root)
+    for name, (_kind, frames, meta) in captures.items():
+        d = root / name
+        d.mkdir(parents=True, exist_ok=True)
+        for i, fr in enumerate(frames):
+            np.save(d / f"frame_{i:03d}.npy", fr.astype(np.uint16))
+        (d / "sequence.yaml").write_text(yaml.safe_dump({k: (float(v) if isinstance(v, float) else v)
+                                                         for k, v in meta.items()}))
+    return root
+
+
+def write_capture_set_dng(root: Path, captures: dict) -> Path:
+    """Write each sequence as ``root/<name>/frame_NNN.dng`` (simcam's DNG writer; ISO,
+    exposure, CFA, black and white levels in the tags)."""
+    from simcam.frame import CameraMeta
+    from simcam.io.dng_write import write_dng
+
+    root = Path(root)
+    for name, (_kind, frames, meta) in captures.items():
+        d = root / name
+        d.mkdir(parents=True, exist_ok=True)
+        cm = CameraMeta(make="loopgen", model="hidden-effect sensor", cfa=meta["cfa"] or "RGGB",
+                        black_level=np.full((1, 1), float(meta["black_level"])),
+                        white_level=float(meta["white_level"]), iso=float(meta["iso"]),
+                        exposure_time_s=float(meta["exposure_s"]))
+        for i, fr in enumerate(frames):
+            write_dng(d / f"frame_{i:03d}.dng", fr, cm)
+    return root

@@ -1,0 +1,188 @@
+"""Physical effects: variances from theory, persistence across frames, Tukey-lambda quantiles."""
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from simcam.noise import NoiseCondition, model_from_entry
+from simcam.noise.effects import EFFECT_NAMES, effect_from_entry, effect_types
+
+COND = NoiseCondition(cfa="RGGB")
+B2 = 1e-6  # base read variance used below
+
+EXAMPLES = {
+    "row_noise": {"sigma": 2e-3},
+    "column_fpn": {"sigma": 2e-3},
+    "dsnu": {"sigma": 2e-3},
+    "prnu": {"sigma": 0.02},
+    "hot_pixels": {"hot_fraction": 0.01, "stuck_fraction": 0.005, "dead_fraction": 0.002},
+    "heavy_tail_read": {"lam": -0.1, "scale": 1e-3},
+    "quantization": {"range_dn": 1023.0},
+    "spatial_correlation": {"coefficient": 0.1},
+    "periodic_pattern": {"amplitude": 1e-3, "period_px": 8.0},
+    "black_level_offset": {"offset": [1e-3, 0.0, 0.0, -1e-3]},
+    "frame_flicker": {"sigma": 0.01},
+    "nonlinearity": {"strength": 0.02},
+    "channel_gain": {"gain": [1.0, 1.02, 0.98, 1.0]},
+}
+
+
+def _comp(effects, base=None, seed=0):
+    base = base or {"type": "gaussian", "sigma": float(np.sqrt(B2))}
+    return model_from_entry({"type": "composite", "base": base, "effects": effects, "sensor_seed": seed})
+
+
+def test_registry_has_every_documented_name():
+    assert set(effect_types()) == set(EFFECT_NAMES) == set(EXAMPLES)
+
+
+@pytest.mark.parametrize("name", EFFECT_NAMES)
+def test_effect_round_trip_and_runs(name):
+    e = effect_from_entry({"type": name, **EXAMPLES[name]})
+    assert effect_from_entry(e.to_entry()) == e
+    m = _comp([e.to_entry()])
+    clean = np.full((40, 36), 0.3, np.float32)
+    a = m.sample(clean, COND, np.random.default_rng(1))
+    b = m.sample(clean, COND, np.random.default_rng(1), chunk_rows=7)
+    assert a.tobytes() == b.tobytes() and a.dtype == np.float32
+
+
+def test_row_noise_row_mean_variance():
+    """Dark frame: row means have var sigma_r^2 + B2 / W.
+
+    SE of a sample variance of n normal values: var * sqrt(2 / (n - 1)); 5 SE.
+    """
+    s = 2e-3
+    h, w = 2000, 64
+    x = _comp([{"type": "row_noise", "sigma": s}]).sample(np.zeros((h, w), np.float32), COND, np.random.default_rng(2))
+    v = x.mean(axis=1).var(ddof=1)
+    th = s * s + B2 / w
+    assert abs(v - th) < 5 * th * np.sqrt(2 / (h - 1))
+
+
+def test_column_fpn_column_mean_variance_and_persistence():
+    s = 2e-3
+    h, w = 64, 2000
+    m = _comp([{"type": "column_fpn", "sigma": s}], seed=7)
+    f1 = m.sample(np.zeros((h, w), np.float32), COND, np.random.default_rng(1))
+    f2 = m.sample(np.zeros((h, w), np.float32), COND, np.random.default_rng(2))
+    c1, c2 = f1.mean(axis=0), f2.mean(axis=0)
+    th = s * s + B2 / h
+    assert abs(c1.var(ddof=1) - th) < 5 * th * np.sqrt(2 / (w - 1))
+    # persistence: the column pattern is shared, the temporal part is not:
+    # cov(c1, c2) = s^2 (SE as above), and frames differ
+    cov = np.cov(c1, c2)[0, 1]
+    assert abs(cov - s * s) < 5 * th * np.sqrt(2 / (w - 1))
+    assert not np.array_equal(f1, f2)
+    # another sensor seed: a different pattern (correlation ~ 0, SE 1/sqrt(w))
+    g = _comp([{"type": "column_fpn", "sigma": s}], seed=8).sample(np.zeros((h, w), np.float32), COND, np.random.default_rng(1))
+    assert abs(np.corrcoef(c1, g.mean(axis=0))[0, 1]) < 5 / np.sqrt(w)
+
+
+def test_dsnu_temporal_mean_variance():
+    """T frames: per-pixel temporal means have var sigma_d^2 + B2 / T across pixels."""
+    s, t = 2e-3, 16
+    m = _comp([{"type": "dsnu", "sigma": s}], seed=3)
+    frames = np.stack([m.sample(np.zeros((64, 64), np.float32), COND, np.random.default_rng(i)) for i in range(t)])
+    tm = frames.mean(axis=0)
+    n = tm.size
+    th = s * s + B2 / t
+    assert abs(tm.var(ddof=1) - th) < 5 * th * np.sqrt(2 / (n - 1))
+
+
+def test_prnu_temporal_mean_variance():
+    """Flat signal mu, NLF base: temporal-mean var = (sigma_p mu)^2 + (b1 mu + b2) / T (E[gain] = 1)."""
+    sp, mu, t, b1, b2 = 0.02, 0.5, 16, 1e-4, 1e-6
+    m = _comp([{"type": "prnu", "sigma": sp}], base={"type": "nlf", "beta1": b1, "beta2": b2}, seed=4)
+    clean = np.full((64, 64), mu, np.float32)
+    frames = np.stack([m.sample(clean, COND, np.random.default_rng(i)) for i in range(t)])
+    tm = frames.mean(axis=0)
+    th = (sp * mu) ** 2 + (b1 * mu + b2) / t
+    assert abs(tm.mean() - mu) < 5 * np.sqrt(th / tm.size)
+    assert abs(tm.var(ddof=1) - th) < 5 * th * np.sqrt(2 / (tm.size - 1))
+
+
+def test_tukey_lambda_quantiles_match_scipy():
+    """Empirical quantiles of scale * TL(lam) vs scipy.stats.tukeylambda.ppf.
+
+    SE of the p-quantile of n draws: sqrt(p (1 - p) / n) / f(q) (asymptotic
+    normality of sample quantiles), f the scipy density; 5 SE.
+    """
+    lam, scale, n = -0.15, 1e-3, 200_000
+    m = _comp([{"type": "heavy_tail_read", "lam": lam, "scale": scale}], base={"type": "gaussian", "sigma": 0.0})
+    x = m.sample(np.zeros((400, 500), np.float32), COND, np.random.default_rng(8)).ravel().astype(np.float64)
+    dist = stats.tukeylambda(lam, scale=scale)
+    for p in (0.001, 0.01, 0.1, 0.5, 0.9, 0.99, 0.999):
+        q = dist.ppf(p)
+        se = np.sqrt(p * (1 - p) / n) / dist.pdf(q)
+        assert abs(np.quantile(x, p) - q) < 5 * se, p
+
+
+def test_hot_pixel_fractions_and_persistence():
+    e = {"type": "hot_pixels", "hot_fraction": 0.01, "hot_offset": 0.2, "stuck_fraction": 0.005,
+         "stuck_value": 1.0, "dead_fraction": 0.002}
+    m = _comp([e], base={"type": "gaussian", "sigma": 0.0}, seed=5)
+    clean = np.full((200, 200), 0.3, np.float32)
+    a = m.sample(clean, COND, np.random.default_rng(1))
+    b = m.sample(clean, COND, np.random.default_rng(2))
+    n = a.size
+    for val, frac in ((0.5, 0.01), (1.0, 0.005), (0.0, 0.002)):
+        cnt = np.isclose(a, val).sum()
+        # binomial count: SE = sqrt(n p (1-p))
+        assert abs(cnt - n * frac) < 5 * np.sqrt(n * frac * (1 - frac)), val
+    assert np.array_equal(a, b)  # no temporal noise: the defect map is fixed
+
+
+def test_spatial_correlation_same_colour_neighbours():
+    c = 0.15
+    m = _comp([{"type": "spatial_correlation", "coefficient": c}], base={"type": "gaussian", "sigma": 0.01})
+    x = m.sample(np.zeros((300, 300), np.float32), COND, np.random.default_rng(3))[4:-4, 4:-4].astype(np.float64)
+    r = np.corrcoef(x[:, :-2].ravel(), x[:, 2:].ravel())[0, 1]
+    r1 = np.corrcoef(x[:, :-1].ravel(), x[:, 1:].ravel())[0, 1]
+    n = x[:, 2:].size
+    # correlation SE ~ (1 - r^2) / sqrt(n)
+    assert abs(r - 2 * c / (1 + 4 * c * c)) < 5 * (1 - r * r) / np.sqrt(n)
+    assert abs(r1) < 5 / np.sqrt(n)
+    assert abs(x.var() - 1e-4 * (1 + 4 * c * c)) < 5 * 1e-4 * (1 + 4 * c * c) * np.sqrt(2 / n) * 3
+
+
+def test_deterministic_effects_exact_values():
+    clean = np.full((4, 4), 0.5, np.float32)
+    zero = {"type": "gaussian", "sigma": 0.0}
+    g = _comp([{"type": "channel_gain", "gain": [1.0, 2.0, 0.5, 1.0]}], base=zero).sample(clean, COND, np.random.default_rng(0))
+    np.testing.assert_allclose(g[:2, :2], [[0.5, 1.0], [0.25, 0.5]])
+    nl = _comp([{"type": "nonlinearity", "strength": 0.1}], base=zero).sample(clean, COND, np.random.default_rng(0))
+    np.testing.assert_allclose(nl, 0.5 - 0.1 * 0.25, rtol=1e-6)
+    q = _comp([{"type": "quantization", "range_dn": 10.0, "step_dn": 2.0}], base=zero).sample(
+        np.full((2, 2), 0.33, np.float32), COND, np.random.default_rng(0))
+    np.testing.assert_allclose(q, 0.4)  # 3.3 DN -> 4 DN with a 2-DN step
+    bl = _comp([{"type": "black_level_offset", "offset": [0.01, 0.0, 0.0, -0.01]}], base=zero).sample(clean, COND, np.random.default_rng(0))
+    np.testing.assert_allclose(bl[:2, :2], [[0.51, 0.5], [0.5, 0.49]], rtol=1e-6)
+    pp = _comp([{"type": "periodic_pattern", "amplitude": 0.01, "period_px": 4.0, "random_phase": False}], base=zero).sample(
+        clean, COND, np.random.default_rng(0))
+    np.testing.assert_allclose(pp[:, 0], 0.5 + 0.01 * np.sin(2 * np.pi * np.arange(4) / 4), atol=1e-7)
+
+
+def test_frame_flicker_frame_mean_variance():
+    """Frame means over K frames: var = (sigma_f mu)^2 + var(base)/N; 5 SE (normal)."""
+    sf, mu, k = 0.01, 0.5, 200
+    m = _comp([{"type": "frame_flicker", "sigma": sf}])
+    means = np.array([m.sample(np.full((8, 8), mu, np.float32), COND, np.random.default_rng(i)).mean() for i in range(k)])
+    th = (sf * mu) ** 2 + B2 / 64
+    assert abs(means.var(ddof=1) - th) < 5 * th * np.sqrt(2 / (k - 1))
+
+
+def test_composite_log_prob_given_fixed_pattern():
+    """DSNU + PRNU composite: log_prob = NLF log_prob at the patterned signal, shifted by the offset."""
+    m = _comp([{"type": "prnu", "sigma": 0.02}, {"type": "dsnu", "sigma": 1e-3}],
+              base={"type": "nlf", "beta1": 1e-3, "beta2": 1e-5}, seed=9)
+    clean = np.random.default_rng(0).random((8, 8), dtype=np.float32)
+    noisy = m.sample(clean, COND, np.random.default_rng(1))
+    fixed = m.fixed_patterns(clean.shape)
+    sig = clean.astype(np.float64) * fixed[0]["gain"]
+    ref = stats.norm.logpdf(noisy - fixed[1]["offset"], sig, np.sqrt(1e-3 * sig + 1e-5))
+    np.testing.assert_allclose(m.log_prob(noisy, clean, COND), ref, rtol=1e-4, atol=1e-4)
+    from simcam.errors import NoiseModelError
+
+    with pytest.raises(NoiseModelError, match="row_noise"):
+        _comp([{"type": "row_noise", "sigma": 1e-3}]).log_prob(noisy, clean, COND)

@@ -1,0 +1,50 @@
+"""The loop's model as a noise-stage profile: round trip and (when simcam.noise is present) validation."""
+
+import numpy as np
+import pytest
+
+from simcam.dataset.loop_model import LoopModel
+from simcam.dataset.loop_profile import models_from_noise_profile, noise_entry, noise_profile
+
+
+def _model():
+    eff = {
+        "prnu": {"sigma": 0.01}, "channel_gain": {"gains": [1.1, 1.0, 1.0, 0.9]}, "frame_flicker": {"sigma": 0.005},
+        "nonlinearity": {"c": -0.1}, "spatial_correlation": {"a": 0.2}, "row_noise": {"sigma_dn": 1.5},
+        "periodic_pattern": {"amplitude_dn": 2.0, "period_px": 8.0, "axis": "row"}, "column_fpn": {"sigma_dn": 1.0},
+        "dsnu": {"sigma_dn": 2.0}, "hot_pixels": {"fraction": 0.001, "log_mean": 4.0, "log_sigma": 0.05},
+        "black_level_offset": {"offset_dn": [6.0, 6.0, 6.0, 6.0]}, "quantization": {"step_dn": 4.0},
+    }
+    return LoopModel("RGGB", np.full((2, 2), 64.0), 1023.0, 2.0, 3.0, 9.0 + 16 / 12 + 2.25 + 2.0, effects=eff)
+
+
+class _Res:
+    def __init__(self, m):
+        self.model, self.iso = m, 800
+
+
+class _Cap:
+    root = "/tmp/sensor"
+
+
+def test_round_trip_through_noise_profile():
+    m = _model()
+    doc = noise_profile([_Res(m)], _Cap())
+    back = models_from_noise_profile(doc, "profile.yaml")[800]
+    assert back.K == pytest.approx(m.K) and back.read_dn == pytest.approx(m.read_dn)
+    assert set(back.effects) == set(m.effects)
+    assert back.effects["dsnu"]["sigma_dn"] == pytest.approx(2.0)
+    assert back.effects["spatial_correlation"]["a"] == pytest.approx(0.2, rel=1e-6)
+    assert back.effects["nonlinearity"]["c"] == pytest.approx(-0.1)
+    assert back.effects["channel_gain"]["gains"] == pytest.approx([1.1, 1.0, 1.0, 0.9])
+    # beta1 on normalised raw = K g_c / (white - black), per site
+    entry, _ = noise_entry(m)
+    assert entry["base"]["beta1"] == pytest.approx([2.2 / 959.0, 2.0 / 959.0, 2.0 / 959.0, 1.8 / 959.0])
+
+
+def test_profile_is_accepted_by_the_noise_stage():
+    profiles = pytest.importorskip("simcam.profiles", reason="simcam.noise (issue 3) not merged yet")
+    doc = noise_profile([_Res(_model())], _Cap())
+    prof = profiles.profile_from_dict(doc, source="profile.yaml")
+    model = prof.model_for(800)
+    assert type(model).__name__.lower().startswith("composite")
