@@ -8,16 +8,22 @@ cell (:data:`simcam.cfa.PACK_OFFSETS`), normalised raw. Any ISO inside the train
 range is accepted (the graph interpolates per-ISO parameters in log-ISO); outside
 it, unknown cameras, bad shapes and dtypes raise :class:`NoiseModelError`.
 Reference: seed ch. 6 (Noise Flow); DESIGN.md "Randomness" (the latent is an input).
+
+:class:`NoiseFlowOnnx` registers the export as the pipeline noise model
+``noiseflow_onnx`` (profile entry ``{type: noiseflow_onnx, path: ..., camera: ...}``).
 """
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import ClassVar, Literal, Optional
 
 import numpy as np
 
 from ..errors import NoiseModelError, require_extra
+from .base import (BLOCK_ROWS, NoiseCondition, NoiseModel, block_rng, check_clean, check_same_shape, frame_key,
+                   register_model)
 
 FORMAT = "simcam-noiseflow-onnx/1"
 PACKING = "(0,0),(0,1),(1,0),(1,1)"
@@ -205,3 +211,130 @@ class OnnxNoiseFlow:
         b = clean.shape[0]
         feeds = {"noise": noise, "clean": clean, "iso": self.iso_array(iso, b), "camera": self.camera_array(camera, b)}
         return self._loglik.run(["loglik"], feeds)[0]
+
+
+# ---------------------------------------------------------------------------
+# ``noiseflow_onnx``: the exported flow as a registered pipeline noise model
+# ---------------------------------------------------------------------------
+#: mosaic rows of context on each side of a tile: 8 couplings x 2 packed pixels of
+#: receptive radius = 16 packed rows = 32 mosaic rows (tiles are then exact).
+HALO_ROWS = 32
+_PROFILES = Path(__file__).resolve().parents[2] / "profiles"
+_SESSIONS: dict = {}
+
+
+def _cached_flow(path: Path, threads: int) -> OnnxNoiseFlow:
+    key = (str(path.resolve()), path.stat().st_mtime_ns, int(threads))
+    if key not in _SESSIONS:
+        _SESSIONS[key] = OnnxNoiseFlow(path, threads=threads)
+    return _SESSIONS[key]
+
+
+@register_model
+class NoiseFlowOnnx(NoiseModel):
+    """Noise Flow exported to ONNX (``simcam flow export``) as a pipeline noise model.
+
+    ``noisy = clean + flow(z; clean, ISO, camera)`` with ``z = T * N(0, I)``; the
+    mosaic is packed by position ((0,0), (0,1), (1,0), (1,1)), as the flow was trained.
+    The latent of row block ``b`` is drawn from ``block_rng(key, b)`` and the flow runs
+    on tiles of ``tile_rows`` with a :data:`HALO_ROWS` halo, so the bytes do not depend
+    on ``chunk_rows``, ``threads`` or ``tile_rows``. Needs the frame's ISO (inside the
+    export's trained range, interpolated in log-ISO) and even H and W. Seed ch. 6.
+
+    Parameters
+    ----------
+    path : str
+        The sampler ``.onnx`` (``<stem>.loglik.onnx`` beside it for :meth:`log_prob`);
+        a relative path is looked up in the working directory, then in ``profiles/``.
+    camera : str, optional
+        Camera name in the export (default: the condition's camera, or the only one).
+    temperature : float, optional
+        Latent scale T (default: the export's ``default_temperature``).
+    threads : int
+        onnxruntime intra-op threads.
+    tile_rows : int
+        Mosaic rows per onnxruntime call (multiple of BLOCK_ROWS; memory bound only).
+    """
+
+    type: Literal["noiseflow_onnx"] = "noiseflow_onnx"
+    path: str
+    camera: Optional[str] = None
+    temperature: Optional[float] = None
+    threads: int = 1
+    tile_rows: int = 512
+    tractable: ClassVar[bool] = True
+
+    def flow(self) -> OnnxNoiseFlow:
+        """The onnxruntime sampler (cached per file and thread count)."""
+        p = Path(self.path)
+        for cand in ([p] if p.is_absolute() else [p, _PROFILES / p]):
+            if cand.is_file():
+                return _cached_flow(cand, self.threads)
+        raise NoiseModelError(f"noiseflow_onnx: path: {self.path!r} not found (looked in the working directory and {_PROFILES})")
+
+    def _camera(self, flow: OnnxNoiseFlow, cond: NoiseCondition) -> str:
+        cam = self.camera or cond.camera
+        if cam is None:
+            if len(flow.cameras) == 1:
+                return flow.cameras[0]
+            raise NoiseModelError(f"noiseflow_onnx: camera: the export holds cameras {flow.cameras}; name one")
+        return cam
+
+    def _check(self, clean: np.ndarray, cond: NoiseCondition) -> None:
+        where = cond.source or "frame"
+        if cond.iso is None:
+            raise NoiseModelError(f"{where}: iso: model 'noiseflow_onnx' needs the frame's ISO, got none")
+        h, w = clean.shape
+        if h % 2 or w % 2:
+            raise NoiseModelError(f"{where}: expected even mosaic height and width for 'noiseflow_onnx', got {h}x{w}")
+
+    def sample(self, clean, cond, rng, *, chunk_rows=None, threads=1):
+        clean = check_clean(clean, where=f"{cond.source or 'clean'}")
+        self._check(clean, cond)
+        flow = self.flow()
+        cam = self._camera(flow, cond)
+        flow.iso_array(cond.iso, 1)
+        flow.camera_array(cam, 1)
+        key = frame_key(rng)
+        t = flow.default_temperature if self.temperature is None else float(self.temperature)
+        h, w = clean.shape
+        z = np.empty((1, 4, h // 2, w // 2), np.float32)
+        for b, r in enumerate(range(0, h, BLOCK_ROWS)):
+            rows = min(BLOCK_ROWS, h - r) // 2
+            z[0, :, r // 2:r // 2 + rows] = block_rng(key, b).standard_normal((4, rows, w // 2), dtype=np.float32)
+        z *= np.float32(t)
+        from ..cfa import pack, unpack
+
+        cp = pack(clean)[None]
+        out = np.empty_like(clean)
+        step = max(BLOCK_ROWS, int(self.tile_rows) // BLOCK_ROWS * BLOCK_ROWS) // 2
+        halo = HALO_ROWS // 2
+        for p0 in range(0, h // 2, step):
+            p1 = min(p0 + step, h // 2)
+            a, b_ = max(0, p0 - halo), min(h // 2, p1 + halo)
+            n = flow.sample(np.ascontiguousarray(cp[:, :, a:b_]), z=np.ascontiguousarray(z[:, :, a:b_]),
+                            iso=cond.iso, camera=cam)[0]
+            out[2 * p0:2 * p1] = unpack(n[:, p0 - a:p1 - a])
+        out += clean
+        return out
+
+    def sample_rows(self, clean_rows, cond, key, row0, *, out=None, threads=1):
+        raise NoiseModelError("model 'noiseflow_onnx': sample_rows is not available (the flow couples rows across "
+                              "blocks); call sample() (chunk_rows is accepted and does not change the result)")
+
+    def log_prob(self, noisy, clean, cond):
+        """Per-pixel share of the frame's log-likelihood (nats, float64).
+
+        A flow gives the joint density of the whole frame, not per-pixel marginals:
+        every pixel gets ``loglik / (H W)`` so that the map sums to the frame's
+        log-likelihood (from ``<stem>.loglik.onnx``).
+        """
+        clean = check_clean(clean, where=f"{cond.source or 'clean'}")
+        noisy = check_same_shape(noisy, clean)
+        self._check(clean, cond)
+        from ..cfa import pack
+
+        flow = self.flow()
+        n = pack(np.asarray(noisy, np.float32) - clean)[None]
+        ll = float(flow.log_prob(n, clean=pack(clean)[None], iso=cond.iso, camera=self._camera(flow, cond))[0])
+        return np.full(clean.shape, ll / clean.size, np.float64)

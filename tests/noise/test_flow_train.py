@@ -165,16 +165,17 @@ def test_cli_train_and_export(tmp_path):
 
 @pytest.mark.slow
 def test_training_recovers_sidd_pixel_nlf(tmp_path):
-    """Acceptance: GP NLF pairs (ISO 100-1600), 1000 patches per ISO, 32x32, 4 epochs.
+    """Acceptance: GP NLF pairs (ISO 100-1600), 400 patches per ISO, 32x32, 2 epochs.
 
-    The bound 0.02 nats is ~40x the standard error of the test NLL/dim difference
-    between model and truth at this size (the difference is paired on the same patches).
+    (profiles/noiseflow_sidd_gp.sh is the full-size run: 1000 per ISO, 8 epochs.) The bound
+    0.02 nats is the issue's; the model-minus-truth NLL/dim difference is paired on the same
+    test patches, so its sampling noise is far below it.
     """
     from simcam.noise.flow.train import train
 
     nlf = read_nlf_table(REPO / "profiles" / "sidd_pixel_nlf.csv")
-    ps = synthesize_nlf_pairs(nlf, 1000, size=32, seed=0, cameras=["GP"], isos=[100.0, 400.0, 800.0, 1600.0])
+    ps = synthesize_nlf_pairs(nlf, 400, size=32, seed=0, cameras=["GP"], isos=[100.0, 400.0, 800.0, 1600.0])
     _, te = split_by_condition(ps, 0.2, 0)
-    row = train(ps, tmp_path, epochs=4, progress=False, threads=2)
+    row = train(ps, tmp_path, epochs=2, progress=False, threads=2)
     assert abs(row["test_nll_per_dim"] - nlf_nll_per_dim(te, nlf)) <= 0.02
     assert row["test_marginal_kl"] <= 0.01
