@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from flow_helpers import small_onnx  # noqa: E402,F401  (fixtures)
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "node"
 

@@ -15,7 +15,7 @@ torch = pytest.importorskip("torch")
 onnx = pytest.importorskip("onnx")
 pytest.importorskip("onnxruntime")
 
-from flow_helpers import nhwc_latent_to_nchw, nhwc_released_to_nchw  # noqa: E402
+from flow_helpers import nhwc_latent_to_nchw, nhwc_released_to_nchw, published_onnx, small_flow, small_onnx  # noqa: E402,F401  (helpers, fixtures)
 
 from simcam.noise.onnx_sampler import OnnxNoiseFlow  # noqa: E402
 

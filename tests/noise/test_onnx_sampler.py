@@ -14,6 +14,7 @@ pytest.importorskip("onnxruntime")
 
 from simcam.errors import NoiseModelError  # noqa: E402
 from simcam.noise.onnx_sampler import OnnxNoiseFlow  # noqa: E402
+from flow_helpers import small_onnx  # noqa: E402,F401  (fixtures)
 
 REPO = Path(__file__).resolve().parents[2]
 

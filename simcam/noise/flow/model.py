@@ -89,7 +89,12 @@ class NoiseFlow(nn.Module):
 
     def __init__(self, config: FlowConfig | None = None, seed: int = 0):
         super().__init__()
-        self.config = cfg = config or FlowConfig()
+        with torch.random.fork_rng(devices=[]):  # the initial weights depend on ``seed`` only
+            torch.manual_seed(seed)
+            self._build(config or FlowConfig(), seed)
+
+    def _build(self, cfg: FlowConfig, seed: int) -> None:
+        self.config = cfg
         m, k = len(cfg.cameras), len(cfg.iso_knots)
         self.register_buffer("iso_knots", torch.tensor(cfg.iso_knots, dtype=torch.float32))
         if cfg.arch == "published":
