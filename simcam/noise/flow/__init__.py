@@ -10,7 +10,8 @@ layers     signal-dependent, gain, LU 1x1 convolution, affine coupling
 model      :class:`NoiseFlow` composite and :class:`FlowConfig`
 published  loader for the authors' released weights (tests only: CC BY-NC-SA)
 export     ONNX export of the sampler and the likelihood graphs
-data       patch sets (.npz, SIDD .MAT pairs) and NLF synthesis
+data       patch sets (.npz, SIDD .MAT pairs) and NLF synthesis (numpy only)
+metrics    marginal KL with the Noise Flow binning (numpy only)
 train      training loop with checkpoints, resume, CSV and plot
 """
 
