@@ -39,10 +39,10 @@ def chart_xyz_d65() -> np.ndarray:
 
 
 def scene_camera_rgb() -> np.ndarray:
-    """H x W x 3 camera RGB of the chart on a mid-grey surround (linear, white ~0.85)."""
+    """H x W x 3 camera RGB of the chart on a dark-grey surround (linear, white ~0.85)."""
     cam = chart_xyz_d65() @ COLOR_MATRIX.T
     img = np.empty((H, W, 3))
-    img[:] = (0.18 * np.array([0.95047, 1.0, 1.08883])) @ COLOR_MATRIX.T
+    img[:] = (0.10 * np.array([0.95047, 1.0, 1.08883])) @ COLOR_MATRIX.T
     ph, pw, gap = 80, 80, 12
     y0, x0 = (H - (4 * ph + 3 * gap)) // 2, (W - (6 * pw + 5 * gap)) // 2
     for k in range(24):

@@ -47,6 +47,27 @@ def black_level_map(meta, shape: tuple[int, int]) -> np.ndarray:
     return black.astype(np.float32)
 
 
+def black_level_cell(meta, shape: tuple[int, int]) -> np.ndarray | None:
+    """The BlackLevel repeat pattern (DN, float32) re-phased to start at ``data[0, 0]``.
+
+    Equals one cell of :func:`black_level_map` when no BlackLevelDeltaH/V apply
+    and the frame is a whole number of cells; returns None otherwise.
+    """
+    if meta.black_level_delta_v is not None or meta.black_level_delta_h is not None:
+        return None
+    bl = np.asarray(meta.black_level, dtype=np.float64)
+    if bl.ndim == 0:
+        bl = bl.reshape(1, 1)
+    if bl.ndim == 3:
+        bl = bl[..., 0]
+    r, c = bl.shape
+    if shape[0] % r or shape[1] % c:
+        return None
+    top, left = (meta.active_area[0], meta.active_area[1]) if meta.active_area else (0, 0)
+    oy, ox = (meta.origin[0] - top) % r, (meta.origin[1] - left) % c
+    return np.roll(bl, (-oy, -ox), axis=(0, 1)).astype(np.float32)
+
+
 @register_stage
 class Normalize(Stage):
     """DN -> normalised raw: linearization, per-site black (with deltas), white. No clipping."""
@@ -67,17 +88,26 @@ class Normalize(Stage):
         if meta.linearization_table is not None:
             table = np.asarray(meta.linearization_table, dtype=np.float32)
             data = table[np.clip(data, 0, table.size - 1).astype(np.int64)]
+        cell = None
         if self.params.black_level is not None:
             black = np.float32(self.params.black_level)
         else:
-            black = black_level_map(meta, data.shape)
+            cell = black_level_cell(meta, data.shape)
+            black = cell if cell is not None else black_level_map(meta, data.shape)
         white = np.float32(self.params.white_level if self.params.white_level is not None else meta.white_level)
         scale = white - black
         if np.any(scale <= 0):
             raise MetadataError(
                 f"{meta.source or 'frame'}: WhiteLevel: expected white ({float(white)}) above the black level "
                 f"(max {float(np.max(black))})")
-        out = (data - black) / scale
+        if cell is not None:  # per-site constants: broadcast over whole cells, no full-size black map
+            (h, w), (r, c) = data.shape, cell.shape
+            out = np.empty((h, w), dtype=np.float32)
+            o4 = out.reshape(h // r, r, w // c, c)
+            np.subtract(np.asarray(data, np.float32).reshape(h // r, r, w // c, c), cell[None, :, None, :], out=o4)
+            np.divide(o4, scale[None, :, None, :], out=o4)
+        else:
+            out = (data - black) / scale
         return frame.evolve(out.astype(np.float32, copy=False), kind="raw", step=self.type)
 
 

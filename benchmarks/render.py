@@ -1,0 +1,383 @@
+"""Render benchmark: a 12 MP DNG -> 8-bit sRGB, simcam against rawpy (LibRaw).
+
+Writes a synthetic 4000 x 3000 RGGB DNG (a lit colour chart, colour ramps and a
+zone plate, with shot and read noise) with simcam's DNG writer, then times the
+whole render DNG -> sRGB 8-bit:
+
+* simcam: ``read_dng`` + the built-in ``srgb`` pipeline with ``demosaic.method``
+  ``bilinear`` and ``malvar2004`` + conversion to uint8;
+* rawpy: ``rawpy.imread`` + ``postprocess(demosaic_algorithm=LINEAR | AHD,
+  use_camera_wb=True, output_bps=8, no_auto_bright=True, gamma=(2.4, 12.92))``.
+
+Runs are interleaved (each round runs every configuration once) and the median
+of ``--runs`` rounds is reported, with MP/s and the ratio to rawpy AHD measured
+in the same run. A second table breaks the simcam render into its steps.
+
+Threads: numpy runs its element-wise kernels on one thread; LibRaw uses OpenMP
+(``OMP_NUM_THREADS``, default: all cores). Set ``OMP_NUM_THREADS`` (or
+``--omp-threads N``) and ``OPENBLAS_NUM_THREADS`` in the environment to change
+them; both are printed.
+
+Usage::
+
+    python benchmarks/render.py                # 4000x3000, 5 rounds
+    python benchmarks/render.py --quick        # 1000x750, 3 rounds (smoke test)
+    python benchmarks/render.py --size 3000x4000 --runs 7
+    python benchmarks/render.py --dng ../shared/data/dng/gopro_hero7_iso252.dng
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+if __package__ in (None, ""):  # run as a script: make the repository importable
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from simcam.frame import CameraMeta, RawFrame  # noqa: E402
+
+#: Canon EOS 550D ColorMatrix (XYZ D65 -> camera), dcraw/Adobe ``adobe_coeff`` / 10000.
+COLOR_MATRIX_D65 = np.array([[0.6941, -0.1164, -0.0857], [-0.3825, 1.1597, 0.2534], [-0.0416, 0.1540, 0.6039]])
+BLACK_DN, WHITE_DN = 512.0, 16383.0
+AS_SHOT_NEUTRAL = np.array([0.47, 1.0, 0.68])  # camera response to white (G = 1)
+DEMOSAIC_METHODS = ("bilinear", "malvar2004")
+RAWPY_ALGOS = ("LINEAR", "AHD")
+
+
+# -- synthetic capture ---------------------------------------------------------------------
+def synthetic_scene(h: int, w: int, seed: int = 0) -> np.ndarray:
+    """Linear camera-RGB radiance (H x W x 3 float32, white = AS_SHOT_NEUTRAL at 1.0).
+
+    Left: a 6 x 4 chart of flat patches under a smooth vignette; right: colour
+    ramps; bottom-right quarter: a zone plate (fine detail for the demosaicers).
+    """
+    rng = np.random.default_rng(seed)
+    y = np.linspace(-1.0, 1.0, h, dtype=np.float32)[:, None]
+    x = np.linspace(-1.0, 1.0, w, dtype=np.float32)[None, :]
+    light = 0.75 * (1.0 - 0.25 * (x * x + y * y))  # smooth fall-off
+    patches = rng.uniform(0.03, 0.9, size=(4, 6, 3)).astype(np.float32)
+    rows = np.minimum((np.arange(h) * 4) // h, 3)
+    cols = np.minimum((np.arange(w) * 6) // w, 5)
+    refl = patches[rows][:, cols]  # H x W x 3
+    xr = (x + 1.0) / 2.0
+    yr = (y + 1.0) / 2.0
+    right = np.broadcast_to(xr > 0.5, (h, w))
+    ramp = np.stack(np.broadcast_arrays(np.float32(0.9) * xr, yr * np.float32(0.8) + 0.05, 1.0 - xr * yr), axis=-1)
+    refl = np.where(right[..., None], ramp, refl)
+    zone = (xr > 0.5) & (yr > 0.5)
+    r2 = ((x - 0.5) ** 2 + (y - 0.5) ** 2) * np.float32(min(h, w) * 0.8)
+    zp = np.float32(0.5) + np.float32(0.4) * np.cos(r2)
+    refl = np.where(zone[..., None], zp[..., None] * np.float32([0.9, 0.85, 0.8]), refl)
+    return (refl * light[..., None] * AS_SHOT_NEUTRAL.astype(np.float32)).astype(np.float32)
+
+
+def synthetic_frame(h: int, w: int, cfa: str = "RGGB", seed: int = 0) -> RawFrame:
+    """A ``raw_dn`` frame of :func:`synthetic_scene` through the CFA, with shot + read noise."""
+    from simcam.cfa import channel_masks
+
+    rgb = synthetic_scene(h, w, seed)
+    masks = channel_masks(cfa, (h, w))
+    mosaic = np.zeros((h, w), np.float32)
+    for i, c in enumerate("RGB"):
+        mosaic[masks[c]] = rgb[..., i][masks[c]]
+    rng = np.random.default_rng(seed + 1)
+    scale = WHITE_DN - BLACK_DN
+    full_well_e = 20000.0
+    electrons = rng.poisson(np.clip(mosaic, 0, None) * full_well_e).astype(np.float32)
+    dn = BLACK_DN + electrons / np.float32(full_well_e) * np.float32(scale)
+    dn += rng.standard_normal((h, w), dtype=np.float32) * np.float32(2.0)
+    dn = np.clip(np.round(dn), 0, WHITE_DN).astype(np.float32)
+    meta = CameraMeta(
+        make="simcam", model="synthetic", unique_camera_model="simcam synthetic", cfa=cfa,
+        black_level=np.full((1, 1), BLACK_DN), white_level=WHITE_DN,
+        as_shot_neutral=AS_SHOT_NEUTRAL.copy(), color_matrix1=COLOR_MATRIX_D65.copy(),
+        calibration_illuminant1=21, iso=100.0, exposure_time_s=0.01,
+    )
+    return RawFrame(dn, meta, kind="raw_dn")
+
+
+def write_synthetic_dng(path: str | Path, h: int, w: int, seed: int = 0) -> Path:
+    """Write the synthetic capture as an uncompressed 16-bit DNG with simcam's writer."""
+    from simcam.io.dng_write import write_dng
+
+    return Path(write_dng(path, synthetic_frame(h, w, seed=seed)))
+
+
+# -- renders ---------------------------------------------------------------------------------
+def simcam_pipeline(method: str):
+    """The built-in ``srgb`` pipeline with ``demosaic.method`` set."""
+    from simcam.pipeline import Pipeline, builtin_pipelines
+
+    if "srgb" not in builtin_pipelines():  # not merged yet: build it in code (stand-ins below)
+        return _StandinPipeline(method)
+    return Pipeline.from_yaml("srgb").with_overrides({"demosaic.method": method})
+
+
+def simcam_render(path: Path, pipe, *, steps: dict[str, float] | None = None) -> np.ndarray:
+    """DNG -> uint8 sRGB through simcam; optionally accumulate per-step seconds in ``steps``."""
+    from simcam.io.dng import read_dng
+    from simcam.io.images import to_samples
+
+    t = _clock()
+    frame = read_dng(path)
+    t = _add(steps, "read_dng", t)
+    seen: dict[str, int] = {}
+    for stage in pipe.stages:
+        frame = stage(frame)
+        n = seen[stage.type] = seen.get(stage.type, 0) + 1
+        t = _add(steps, stage.type if n == 1 else f"{stage.type}[{n}]", t)
+    out = to_samples(frame.data, "uint8")
+    _add(steps, "to_uint8", t)
+    return out
+
+
+def _clock() -> tuple[float, float]:
+    return time.perf_counter(), time.process_time()
+
+
+def _add(steps, key, since: tuple[float, float]) -> tuple[float, float]:
+    """Record (wall, CPU) seconds since ``since`` under ``key``; return the new clock."""
+    now = _clock()
+    if steps is not None:
+        steps.setdefault(key, []).append((now[0] - since[0], now[1] - since[1]))
+    return now
+
+
+def rawpy_render(path: Path, algo: str) -> np.ndarray:
+    """DNG -> uint8 sRGB through LibRaw (camera white balance, no auto-brightening, sRGB curve)."""
+    import rawpy
+
+    with rawpy.imread(str(path)) as raw:
+        return raw.postprocess(
+            demosaic_algorithm=getattr(rawpy.DemosaicAlgorithm, algo), use_camera_wb=True,
+            output_bps=8, no_auto_bright=True, gamma=(2.4, 12.92), output_color=rawpy.ColorSpace.sRGB,
+        )
+
+
+# -- stand-ins used only until the colour stages (white balance, colour, sRGB curve) are on main --
+class _StandinStep:
+    """A timed render step that is not (yet) a registered stage."""
+
+    def __init__(self, type_: str, fn):
+        self.type, self.fn = type_, fn
+
+    def __call__(self, frame: RawFrame) -> RawFrame:
+        return self.fn(frame)
+
+
+def _standin_white_balance(frame: RawFrame) -> RawFrame:
+    """Mosaic x 1/AsShotNeutral per CFA site (G = 1)."""
+    gains = (1.0 / np.asarray(frame.meta.as_shot_neutral, np.float64)).astype(np.float32)
+    cell = np.array([gains["RGB".index(c)] for c in frame.meta.cfa], np.float32).reshape(1, 2, 1, 2)
+    h, w = frame.data.shape
+    out = (frame.data.reshape(h // 2, 2, w // 2, 2) * cell).reshape(h, w)
+    return frame.evolve(out, step="white_balance")
+
+
+def _standin_camera_to_srgb(frame: RawFrame) -> RawFrame:
+    """White-balanced camera RGB -> linear sRGB: dcraw's rgb_cam from ColorMatrix1 (D65),
+    rows of camera-from-sRGB normalised so that white stays white."""
+    xyz_to_srgb = np.array([[3.2404542, -1.5371385, -0.4985314], [-0.9692660, 1.8760108, 0.0415560],
+                            [0.0556434, -0.2040259, 1.0572252]])
+    cam_from_srgb = np.asarray(frame.meta.color_matrix1) @ np.linalg.inv(xyz_to_srgb)
+    cam_from_srgb /= cam_from_srgb.sum(axis=1, keepdims=True)
+    m = np.linalg.inv(cam_from_srgb).astype(np.float32)
+    out = frame.data @ m.T
+    return frame.evolve(out, kind="linear_srgb", step="camera_to_srgb")
+
+
+def _standin_srgb_encode(frame: RawFrame) -> RawFrame:
+    """Clip to [0, 1] and apply the sRGB OETF (IEC 61966-2-1)."""
+    y = np.clip(frame.data, 0.0, 1.0)
+    lin = y * np.float32(12.92)
+    np.power(y, np.float32(1 / 2.4), out=y)
+    y *= np.float32(1.055)
+    y -= np.float32(0.055)
+    np.copyto(y, lin, where=lin <= np.float32(0.0031308 * 12.92))
+    return frame.evolve(y, kind="display", step="srgb_encode")
+
+
+class _StandinPipeline:
+    """The render built in code: registered stages where they exist, stand-ins (*) where not.
+
+    normalize, lens_shading, crop, white_balance, demosaic, camera_to_xyz + xyz_to_srgb
+    (stand-in: camera_to_srgb*), gamma (stand-in: srgb_encode*).
+    """
+
+    def __init__(self, method: str):
+        from simcam.stages.base import stage_types
+
+        have = stage_types()
+        nodes = [("normalize", {}), ("lens_shading", {}), ("crop", {}), ("white_balance", {}),
+                 ("demosaic", {"method": method}), ("camera_to_xyz", {}), ("xyz_to_srgb", {}),
+                 ("gamma", {"curve": "srgb"})]
+        standins = {"white_balance": ("white_balance*", _standin_white_balance),
+                    "camera_to_xyz": ("camera_to_srgb*", _standin_camera_to_srgb),
+                    "gamma": ("srgb_encode*", _standin_srgb_encode)}
+        real_colour = all(k in have for k in ("camera_to_xyz", "xyz_to_srgb"))
+        self.stages = []
+        for key, params in nodes:
+            if key == "xyz_to_srgb" and not real_colour:
+                continue  # the camera_to_srgb* stand-in covers both
+            if key in have and (key != "camera_to_xyz" or real_colour):
+                self.stages.append(have[key](**params))
+            else:
+                self.stages.append(_StandinStep(*standins[key]))
+
+
+# -- benchmark -------------------------------------------------------------------------------
+def run_benchmark(h: int, w: int, runs: int, *, workdir: str | Path | None = None, save: str | Path | None = None,
+                  dng: str | Path | None = None, out=print) -> dict:
+    """Time every configuration ``runs`` times (interleaved) and print the tables.
+
+    Returns a dict with ``"results"`` (label -> list of wall seconds), ``"cpu"``
+    (label -> list of process CPU seconds, all threads), ``"steps"`` (method ->
+    step -> list of (wall, CPU) seconds) and ``"mean_abs_diff"`` (label -> mean absolute 8-bit
+    difference to rawpy AHD, a sanity check of the render).
+    """
+    with tempfile.TemporaryDirectory(dir=workdir) as tmp:
+        if dng is None:
+            path = Path(tmp) / "synthetic.dng"
+            t0 = time.perf_counter()
+            write_synthetic_dng(path, h, w)
+            out(f"wrote {w}x{h} synthetic DNG ({path.stat().st_size / 1e6:.1f} MB) in {time.perf_counter() - t0:.2f} s")
+        else:
+            path = Path(dng)
+            out(f"input: {path}")
+        pipes = {m: simcam_pipeline(m) for m in DEMOSAIC_METHODS}
+        p0 = pipes[DEMOSAIC_METHODS[0]]
+        how = f"built-in {p0.source}" if getattr(p0, "source", "") else "built in this script"
+        out(f"simcam pipeline ({how}): {[s.type for s in p0.stages]}, demosaic.method = {list(DEMOSAIC_METHODS)}")
+        results: dict[str, list[float]] = {}
+        cpu: dict[str, list[float]] = {}
+        steps: dict[str, dict[str, list[float]]] = {m: {} for m in DEMOSAIC_METHODS}
+        images: dict[str, np.ndarray] = {}
+        for r in range(runs + 1):  # round 0 warms caches and imports; not counted
+            for m in DEMOSAIC_METHODS:
+                st: dict[str, list[float]] = {}
+                t0, c0 = time.perf_counter(), time.process_time()
+                img = simcam_render(path, pipes[m], steps=st)
+                dt, dc = time.perf_counter() - t0, time.process_time() - c0
+                if r:
+                    results.setdefault(f"simcam {m}", []).append(dt)
+                    cpu.setdefault(f"simcam {m}", []).append(dc)
+                    for k, v in st.items():
+                        steps[m].setdefault(k, []).extend(v)
+                images[f"simcam {m}"] = img
+            for a in RAWPY_ALGOS:
+                t0, c0 = time.perf_counter(), time.process_time()
+                img = rawpy_render(path, a)
+                dt, dc = time.perf_counter() - t0, time.process_time() - c0
+                if r:
+                    results.setdefault(f"rawpy {a}", []).append(dt)
+                    cpu.setdefault(f"rawpy {a}", []).append(dc)
+                images[f"rawpy {a}"] = img
+    if save is not None:
+        from simcam.io.images import write_image
+
+        for k, img in images.items():
+            write_image(Path(save) / (k.replace(" ", "_") + ".png"), img.astype(np.float32) / 255.0)
+    ref = images["rawpy AHD"].astype(np.float32)
+    diffs = {}
+    for k, img in images.items():
+        if img.shape != ref.shape:  # e.g. a DefaultCrop LibRaw does not apply
+            out(f"note: {k} output is {img.shape}, rawpy AHD's {ref.shape}: no difference computed")
+            diffs[k] = float("nan")
+            continue
+        b = 8  # ignore borders, where demosaicers legitimately differ
+        diffs[k] = float(np.mean(np.abs(img[b:-b, b:-b].astype(np.float32) - ref[b:-b, b:-b])))
+    h, w = images["simcam malvar2004"].shape[:2]
+    print_tables(h, w, runs, results, cpu, steps, diffs, out=out)
+    return {"results": results, "cpu": cpu, "steps": steps, "mean_abs_diff": diffs}
+
+
+def print_tables(h, w, runs, results, cpu, steps, diffs, *, out=print) -> None:
+    mp = h * w / 1e6
+    ahd = float(np.median(results["rawpy AHD"]))
+    out("")
+    out(f"### Render DNG -> sRGB 8-bit, {w}x{h} ({mp:.1f} MP), median of {runs} runs")
+    out("")
+    out(f"{_thread_line()}")
+    out("")
+    out("| render | median s | min s | MP/s (median) | ratio to rawpy AHD | median CPU s (all threads) "
+        "| mean abs diff to AHD (8-bit levels) |")
+    out("|---|---:|---:|---:|---:|---:|---:|")
+    for k in [f"simcam {m}" for m in DEMOSAIC_METHODS] + [f"rawpy {a}" for a in RAWPY_ALGOS]:
+        med = float(np.median(results[k]))
+        out(f"| {k} | {med:.3f} | {min(results[k]):.3f} | {mp / med:.1f} | {med / ahd:.2f} "
+            f"| {np.median(cpu[k]):.3f} | {diffs[k]:.2f} |")
+    out("")
+    out(f"### simcam render steps, median seconds of {runs} runs (wall; CPU of this process)")
+    out("")
+    keys = list(next(iter(steps.values())).keys())
+    out("| step | " + " | ".join(f"{m} wall | {m} CPU" for m in DEMOSAIC_METHODS) + " |")
+    out("|---|" + "---:|---:|" * len(DEMOSAIC_METHODS))
+
+    def med(m, k, i):
+        return float(np.median([v[i] for v in steps[m][k]]))
+
+    for k in keys:
+        out(f"| {k} | " + " | ".join(f"{med(m, k, 0):.3f} | {med(m, k, 1):.3f}" for m in DEMOSAIC_METHODS) + " |")
+    out("| **sum of steps** | " + " | ".join(
+        f"{sum(med(m, k, 0) for k in keys):.3f} | {sum(med(m, k, 1) for k in keys):.3f}" for m in DEMOSAIC_METHODS)
+        + " |")
+    if any(k.endswith("*") for k in keys):
+        out("")
+        out("(*) stand-in step written in this script until the colour stages are merged.")
+
+
+def _thread_line() -> str:
+    omp = os.environ.get("OMP_NUM_THREADS", f"unset (LibRaw OpenMP uses all {os.cpu_count()} cores)")
+    blas = os.environ.get("OPENBLAS_NUM_THREADS", "unset")
+    return (f"Threads: numpy element-wise kernels single-threaded; OMP_NUM_THREADS={omp}; "
+            f"OPENBLAS_NUM_THREADS={blas}. Machine: {platform.processor() or platform.machine()}, "
+            f"{os.cpu_count()} cores; numpy {np.__version__}, rawpy {_rawpy_version()}.")
+
+
+def _rawpy_version() -> str:
+    import rawpy
+
+    return f"{rawpy.__version__} (LibRaw {rawpy.libraw_version})"
+
+
+def _parse_size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--size: expected WIDTHxHEIGHT like 4000x3000, got {text!r}") from None
+    if w < 64 or h < 64:
+        raise argparse.ArgumentTypeError(f"--size: expected at least 64x64, got {text!r}")
+    return h, w
+
+
+def main(argv: list[str] | None = None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--size", type=_parse_size, default=None, help="WIDTHxHEIGHT (default 4000x3000)")
+    ap.add_argument("--runs", type=int, default=None, help="timed rounds (default 5; 3 with --quick)")
+    ap.add_argument("--quick", action="store_true", help="smoke test: 1000x750, 3 rounds")
+    ap.add_argument("--workdir", default=None, help="folder for the temporary DNG (default: system temp)")
+    ap.add_argument("--dng", default=None, help="benchmark this DNG instead of the synthetic one (--size ignored)")
+    ap.add_argument("--save", default=None, help="folder to write the four renders as PNG (for a look)")
+    ap.add_argument("--omp-threads", type=int, default=None,
+                    help="set OMP_NUM_THREADS for LibRaw (must happen before rawpy is imported)")
+    args = ap.parse_args(argv)
+    if args.omp_threads is not None:
+        if "rawpy" in sys.modules:
+            ap.error("--omp-threads: rawpy is already imported in this process; set OMP_NUM_THREADS instead")
+        os.environ["OMP_NUM_THREADS"] = str(args.omp_threads)
+    h, w = args.size or ((750, 1000) if args.quick else (3000, 4000))
+    runs = args.runs or (3 if args.quick else 5)
+    if runs < 1:
+        ap.error(f"--runs: expected at least 1, got {runs}")
+    return run_benchmark(h, w, runs, workdir=args.workdir, save=args.save, dng=args.dng)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,106 @@
+"""Display transforms: XYZ (D50) -> linear sRGB, transfer functions, tone curves (pure functions).
+
+Kernels take and return float32 arrays; matrices are float64 constants.
+
+References: IEC 61966-2-1:1999 (sRGB: primaries, D65 white, piecewise OETF and the
+published XYZ -> RGB matrix); Lam (1985) Bradford transform; Hable, J. (2010)
+"Filmic Tonemapping Operators", http://filmicworlds.com/blog/filmic-tonemapping-operators/
+(Uncharted 2 curve); A. Abdelhamed, simple-camera-pipeline (SIDD renderer).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .dng import D50_XY, bradford_matrix, xy_to_xyz
+
+#: sRGB / Rec. 709 white (D65), CIE 1931 xy, as IEC 61966-2-1 gives it.
+SRGB_WHITE_XY = np.array([0.3127, 0.3290])
+
+#: XYZ (D65, Y = 1 white) -> linear sRGB, the matrix published in IEC 61966-2-1.
+XYZ_TO_SRGB = np.array([
+    [3.2406, -1.5372, -0.4986],
+    [-0.9689, 1.8758, 0.0415],
+    [0.0557, -0.2040, 1.0570],
+])
+
+#: The XYZ -> sRGB matrix simple-camera-pipeline uses (Lindbloom's, 7 decimals) before
+#: it row-normalises it (``transform_xyz_to_srgb``).
+_SIDD_XYZ_TO_SRGB = np.array([
+    [3.2404542, -1.5371385, -0.4985314],
+    [-0.9692660, 1.8760108, 0.0415560],
+    [0.0556434, -0.2040259, 1.0572252],
+])
+
+
+def xyz_d50_to_linear_srgb_matrix() -> np.ndarray:
+    """3x3 float64: Bradford D50 -> D65, then IEC 61966-2-1 XYZ -> linear sRGB."""
+    return XYZ_TO_SRGB @ bradford_matrix(xy_to_xyz(D50_XY), xy_to_xyz(SRGB_WHITE_XY))
+
+
+def sidd_xyz_to_srgb_matrix() -> np.ndarray:
+    """simple-camera-pipeline's XYZ -> sRGB: Lindbloom's D65 matrix with rows normalised to sum 1.
+
+    No chromatic adaptation: XYZ (1, 1, 1) maps to RGB (1, 1, 1). Compatibility only.
+    """
+    return _SIDD_XYZ_TO_SRGB / _SIDD_XYZ_TO_SRGB.sum(axis=1, keepdims=True)
+
+
+def apply_matrix(rgb: np.ndarray, matrix: np.ndarray) -> np.ndarray:
+    """H x W x 3 image times a 3x3 matrix (``out[..., i] = sum_j M[i, j] * rgb[..., j]``), float32."""
+    m = np.asarray(matrix, dtype=np.float32)
+    out = rgb.astype(np.float32, copy=False) @ m.T
+    return np.ascontiguousarray(out, dtype=np.float32)
+
+
+# -- transfer functions ------------------------------------------------------------------
+
+def srgb_oetf(x: np.ndarray) -> np.ndarray:
+    """sRGB encoding (IEC 61966-2-1): ``12.92 x`` for ``x <= 0.0031308``, else ``1.055 x^(1/2.4) - 0.055``.
+
+    Domain: linear [0, 1] (values above 1 follow the power branch, negatives the
+    linear branch). Range: encoded [0, 1]. float32.
+    """
+    x = np.asarray(x, dtype=np.float32)
+    hi = 1.055 * np.power(np.maximum(x, np.float32(0.0031308)), np.float32(1.0 / 2.4)) - 0.055
+    return np.where(x <= 0.0031308, x * np.float32(12.92), hi).astype(np.float32)
+
+
+def power_encode(x: np.ndarray, exponent: float) -> np.ndarray:
+    """``sign(x) * |x|^exponent`` (pure power "gamma", e.g. exponent 1/2.2), float32."""
+    x = np.asarray(x, dtype=np.float32)
+    return (np.sign(x) * np.power(np.abs(x), np.float32(exponent))).astype(np.float32)
+
+
+# -- tone curves ------------------------------------------------------------------------------
+
+def tone_smoothstep(x: np.ndarray) -> np.ndarray:
+    """simple-camera-pipeline's "simple tone curve" ``3 x^2 - 2 x^3`` on ``x`` clipped to [0, 1].
+
+    The cubic is monotonic only on [0, 1], hence the clip. Range [0, 1]. float32.
+    """
+    x = np.clip(np.asarray(x, dtype=np.float32), 0.0, 1.0)
+    return (x * x * (3.0 - 2.0 * x)).astype(np.float32)
+
+
+#: Hable's Uncharted 2 curve constants: shoulder strength A, linear strength B, linear
+#: angle C, toe strength D, toe numerator E, toe denominator F, linear white point W,
+#: and the exposure bias he applies before the curve.
+HABLE = dict(A=0.15, B=0.50, C=0.10, D=0.20, E=0.02, F=0.30, W=11.2, bias=2.0)
+
+
+def _hable(x):
+    a, b, c, d, e, f = (HABLE[k] for k in "ABCDEF")
+    return (x * (a * x + c * b) + d * e) / (x * (a * x + b) + d * f) - e / f
+
+
+def tone_filmic(x: np.ndarray, exposure: float = 0.0) -> np.ndarray:
+    """Hable (2010) "Uncharted 2" filmic curve on scene-linear values, per channel.
+
+    ``y = H(2^exposure * bias * x) / H(W)`` with ``H(x) = (x(Ax + CB) + DE) / (x(Ax + B) + DF) - E/F``
+    and the constants of :data:`HABLE`. ``exposure`` in stops (EV). Negative input is
+    clipped to 0; the output is display-linear in [0, 1) (encode it with a gamma stage).
+    """
+    x = np.maximum(np.asarray(x, dtype=np.float32), 0.0)
+    k = np.float32(2.0 ** float(exposure) * HABLE["bias"])
+    return (_hable(k * x) / np.float32(_hable(np.float32(HABLE["W"])))).astype(np.float32)

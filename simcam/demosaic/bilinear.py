@@ -1,0 +1,68 @@
+"""Bilinear Bayer demosaicing, float32.
+
+Each missing colour is the mean of its nearest samples of that colour: G at an
+R/B site from the four edge neighbours, R/B at a G site from the two neighbours
+along the row or column holding that colour, B at an R site (R at a B site) from
+the four diagonals (Losson, Macaire & Yang 2010, "Comparison of color
+demosaicing methods", Adv. Imaging Electron Phys. 162, doi:10.1016/S1076-5670(10)62005-8).
+Evaluated only where needed on the four CFA-phase planes; border: whole-sample
+mirror, which keeps the Bayer phase (see :mod:`simcam.demosaic._planes`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._planes import STRIP_ROWS, PhaseView, check_mosaic, crop_output, phase_planes, site_layout
+
+
+def demosaic_bilinear(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
+    """Demosaic a Bayer mosaic by bilinear interpolation.
+
+    Parameters
+    ----------
+    mosaic : ndarray
+        H x W Bayer mosaic (computed in float32); H, W >= 2, odd sizes allowed.
+    cfa : str
+        "RGGB", "BGGR", "GRBG" or "GBRG".
+
+    Returns
+    -------
+    ndarray
+        H x W x 3 float32 RGB in the units of ``mosaic``, not clipped.
+
+    References
+    ----------
+    Losson et al. 2010, doi:10.1016/S1076-5670(10)62005-8. Equals
+    ``colour_demosaicing.demosaicing_CFA_Bayer_bilinear`` away from the 1-pixel
+    border (and everywhere on a phase-preserving mirror-padded mosaic).
+    """
+    m, cfa = check_mosaic(mosaic, cfa, "bilinear")
+    h, w = m.shape
+    planes, he, we = phase_planes(m)
+    h2, w2 = he // 2, we // 2
+    rgb = np.empty((he, we, 3), dtype=np.float32)
+    rows = min(STRIP_ROWS, h2)
+    buf = np.empty((rows, w2), dtype=np.float32)
+    for s0 in range(0, h2, rows):
+        s1 = min(s0 + rows, h2)
+        t = buf[: s1 - s0]
+        for (p, q), (site, horiz) in site_layout(cfa).items():
+            nb = PhaseView(planes, p, q, s0, s1, w2)
+            out = rgb[2 * s0 + p:2 * s1:2, q::2]
+            out[..., site] = nb(0, 0)
+            if site == 1:  # G site: row neighbours give `horiz`, column neighbours the other
+                np.add(nb(0, -1), nb(0, 1), out=t)
+                np.multiply(t, 0.5, out=out[..., horiz])
+                np.add(nb(-1, 0), nb(1, 0), out=t)
+                np.multiply(t, 0.5, out=out[..., 2 - horiz])
+            else:  # R/B site: G from the 4 edge neighbours, the other from the 4 diagonals
+                np.add(nb(0, -1), nb(0, 1), out=t)
+                t += nb(-1, 0)
+                t += nb(1, 0)
+                np.multiply(t, 0.25, out=out[..., 1])
+                np.add(nb(-1, -1), nb(-1, 1), out=t)
+                t += nb(1, -1)
+                t += nb(1, 1)
+                np.multiply(t, 0.25, out=out[..., 2 - site])
+    return crop_output(rgb, h, w)

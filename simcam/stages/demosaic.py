@@ -1,0 +1,42 @@
+"""The ``demosaic`` stage: normalised-raw Bayer mosaic -> camera RGB.
+
+Kernels live in :mod:`simcam.demosaic`; this stage checks the frame, picks the
+method and records the step. Metadata is passed on unchanged (``meta.cfa`` still
+names the sensor's pattern; ``kind`` says the data is now RGB).
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from ..demosaic import DEMOSAIC_METHODS
+from ..errors import StageError
+from ..frame import RawFrame
+from .base import Stage, StageParams, register_stage
+
+
+@register_stage
+class Demosaic(Stage):
+    """Bayer demosaicing: ``raw`` (H x W) -> ``camera_rgb`` (H x W x 3 float32), not clipped.
+
+    ``method``: ``bilinear``, ``malvar2004`` (default; Malvar, He & Cutler 2004,
+    doi:10.1109/ICASSP.2004.1326587) or ``menon2007`` (Menon et al. 2007,
+    doi:10.1109/TIP.2006.884928, via colour-demosaicing; slow).
+    """
+
+    type = "demosaic"
+    accepts = frozenset({"raw"})
+    produces = "camera_rgb"
+
+    class Params(StageParams):
+        method: Literal["bilinear", "malvar2004", "menon2007"] = "malvar2004"
+
+    def apply(self, frame: RawFrame, drawn=None) -> RawFrame:
+        src = frame.meta.source or "frame"
+        if frame.meta.cfa is None:
+            raise StageError(f"{src}: cfa: demosaic needs a Bayer pattern (RGGB, BGGR, GRBG, GBRG), got None")
+        try:
+            rgb = DEMOSAIC_METHODS[self.params.method](frame.data, frame.meta.cfa)
+        except StageError as exc:
+            raise StageError(f"{src}: {exc}") from None
+        return frame.evolve(rgb, kind="camera_rgb", step=self.type)

@@ -1,0 +1,99 @@
+"""``white_balance``: per-channel gains on a mosaic (per CFA site) or on camera RGB.
+
+Gains come from the capture's white (AsShotNeutral, or AsShotWhiteXY through the
+colour matrices, DNG 1.6 chapter 6), from an explicit camera ``neutral``
+(gains = 1 / neutral) or are given directly; they are normalised so that G = 1.
+The gains applied are recorded (multiplied into any earlier ones) in a copy of the
+metadata as ``meta.white_balance_gains`` so later colour stages can undo them.
+"""
+
+from __future__ import annotations
+
+from typing import Literal, Optional
+
+import numpy as np
+
+from ..cfa import site_colour_index
+from ..colour.dng import DngColorProfile, check_vector, xy_to_camera_neutral
+from ..errors import MetadataError, StageError
+from ..frame import RawFrame
+from .base import Stage, StageParams, register_stage
+
+
+def capture_neutral(meta) -> np.ndarray:
+    """The capture's camera neutral (float64, G = 1): AsShotNeutral, else from AsShotWhiteXY."""
+    src = meta.source or "metadata"
+    if meta.as_shot_neutral is not None:
+        n = check_vector(meta.as_shot_neutral, "AsShotNeutral", src)
+        return n / n[1]
+    if meta.as_shot_white_xy is not None:
+        xy = check_vector(meta.as_shot_white_xy, "AsShotWhiteXY", src, n=2)
+        return xy_to_camera_neutral(DngColorProfile.from_meta(meta), xy)
+    raise MetadataError(f"{src}: AsShotNeutral: missing (and no AsShotWhiteXY); expected the capture's "
+                        f"white, or set white_balance neutral: [r, g, b] / gains: [r, g, b]")
+
+
+def apply_gains(frame: RawFrame, gains: np.ndarray) -> np.ndarray:
+    """Multiply the data by per-channel ``gains`` (R, G, B): per CFA site on a mosaic. float32."""
+    g = np.asarray(gains, dtype=np.float32)
+    if frame.data.ndim == 3:
+        return (frame.data * g).astype(np.float32)
+    if frame.meta.cfa is None:
+        raise StageError(f"{frame.meta.source or 'frame'}: cfa: a mosaic needs meta.cfa to be white-balanced")
+    idx = site_colour_index(frame.meta.cfa)
+    out = np.array(frame.data, dtype=np.float32, copy=True)
+    for dy in range(2):
+        for dx in range(2):
+            out[dy::2, dx::2] *= g[idx[dy, dx]]
+    return out
+
+
+@register_stage
+class WhiteBalance(Stage):
+    """White balance by channel gains (G = 1); records them as ``meta.white_balance_gains``.
+
+    ``source``: ``as_shot`` (the file's white), ``neutral`` (explicit camera neutral,
+    gains = 1 / neutral), ``gains`` (explicit), ``none`` (no change).
+    """
+
+    type = "white_balance"
+    accepts = frozenset({"raw", "camera_rgb"})
+
+    class Params(StageParams):
+        source: Literal["as_shot", "neutral", "gains", "none"] = "as_shot"
+        #: camera neutral (R, G, B) in stored-value space, > 0; with source: neutral
+        neutral: Optional[tuple[float, float, float]] = None
+        #: gains (R, G, B), > 0; normalised so G = 1; with source: gains
+        gains: Optional[tuple[float, float, float]] = None
+
+    def __init__(self, params=None, **kw):
+        super().__init__(params, **kw)
+        p = self.params
+        if (p.source == "neutral") != (p.neutral is not None):
+            raise StageError("white_balance: neutral: expected [r, g, b] exactly when source is 'neutral'")
+        if (p.source == "gains") != (p.gains is not None):
+            raise StageError("white_balance: gains: expected [r, g, b] exactly when source is 'gains'")
+        for name in ("neutral", "gains"):
+            v = getattr(p, name)
+            if v is not None and not all(np.isfinite(x) and x > 0 for x in v):
+                raise StageError(f"white_balance: {name}: expected three finite positive numbers, got {list(v)}")
+
+    def gains_for(self, frame: RawFrame) -> np.ndarray | None:
+        """The gains (R, G, B), G = 1, this stage applies to ``frame`` (None for source: none)."""
+        p = self.params
+        if p.source == "none":
+            return None
+        if p.source == "gains":
+            g = np.asarray(p.gains, dtype=np.float64)
+            return g / g[1]
+        neutral = capture_neutral(frame.meta) if p.source == "as_shot" else np.asarray(p.neutral, dtype=np.float64)
+        return neutral[1] / neutral
+
+    def apply(self, frame: RawFrame, drawn=None) -> RawFrame:
+        gains = self.gains_for(frame)
+        if gains is None:
+            return frame.evolve(step=self.type)
+        meta = frame.meta.copy()
+        prev = meta.white_balance_gains
+        meta.white_balance_gains = gains if prev is None else np.asarray(prev, dtype=np.float64) * gains
+        return frame.evolve(apply_gains(frame, gains), meta=meta, step=self.type)
