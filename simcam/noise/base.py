@@ -191,7 +191,7 @@ def model_types() -> dict[str, type[NoiseModel]]:
 
 
 def _load_builtin() -> None:
-    from . import clipping, composite, gaussian, nlf, poisson_gaussian, poisson_mixture  # noqa: F401
+    from . import clipping, composite, gaussian, nlf, onnx_sampler, poisson_gaussian, poisson_mixture  # noqa: F401
 
 
 def model_from_entry(entry: Any, *, where: str = "model") -> NoiseModel:
