@@ -113,10 +113,8 @@ def write_synthetic_dng(path: str | Path, h: int, w: int, seed: int = 0) -> Path
 # -- renders ---------------------------------------------------------------------------------
 def simcam_pipeline(method: str):
     """The built-in ``srgb`` pipeline with ``demosaic.method`` set."""
-    from simcam.pipeline import Pipeline, builtin_pipelines
+    from simcam.pipeline import Pipeline
 
-    if "srgb" not in builtin_pipelines():  # not merged yet: build it in code (stand-ins below)
-        return _StandinPipeline(method)
     return Pipeline.from_yaml("srgb").with_overrides({"demosaic.method": method})
 
 
@@ -161,77 +159,6 @@ def rawpy_render(path: Path, algo: str) -> np.ndarray:
         )
 
 
-# -- stand-ins used only until the colour stages (white balance, colour, sRGB curve) are on main --
-class _StandinStep:
-    """A timed render step that is not (yet) a registered stage."""
-
-    def __init__(self, type_: str, fn):
-        self.type, self.fn = type_, fn
-
-    def __call__(self, frame: RawFrame) -> RawFrame:
-        return self.fn(frame)
-
-
-def _standin_white_balance(frame: RawFrame) -> RawFrame:
-    """Mosaic x 1/AsShotNeutral per CFA site (G = 1)."""
-    gains = (1.0 / np.asarray(frame.meta.as_shot_neutral, np.float64)).astype(np.float32)
-    cell = np.array([gains["RGB".index(c)] for c in frame.meta.cfa], np.float32).reshape(1, 2, 1, 2)
-    h, w = frame.data.shape
-    out = (frame.data.reshape(h // 2, 2, w // 2, 2) * cell).reshape(h, w)
-    return frame.evolve(out, step="white_balance")
-
-
-def _standin_camera_to_srgb(frame: RawFrame) -> RawFrame:
-    """White-balanced camera RGB -> linear sRGB: dcraw's rgb_cam from ColorMatrix1 (D65),
-    rows of camera-from-sRGB normalised so that white stays white."""
-    xyz_to_srgb = np.array([[3.2404542, -1.5371385, -0.4985314], [-0.9692660, 1.8760108, 0.0415560],
-                            [0.0556434, -0.2040259, 1.0572252]])
-    cam_from_srgb = np.asarray(frame.meta.color_matrix1) @ np.linalg.inv(xyz_to_srgb)
-    cam_from_srgb /= cam_from_srgb.sum(axis=1, keepdims=True)
-    m = np.linalg.inv(cam_from_srgb).astype(np.float32)
-    out = frame.data @ m.T
-    return frame.evolve(out, kind="linear_srgb", step="camera_to_srgb")
-
-
-def _standin_srgb_encode(frame: RawFrame) -> RawFrame:
-    """Clip to [0, 1] and apply the sRGB OETF (IEC 61966-2-1)."""
-    y = np.clip(frame.data, 0.0, 1.0)
-    lin = y * np.float32(12.92)
-    np.power(y, np.float32(1 / 2.4), out=y)
-    y *= np.float32(1.055)
-    y -= np.float32(0.055)
-    np.copyto(y, lin, where=lin <= np.float32(0.0031308 * 12.92))
-    return frame.evolve(y, kind="display", step="srgb_encode")
-
-
-class _StandinPipeline:
-    """The render built in code: registered stages where they exist, stand-ins (*) where not.
-
-    normalize, lens_shading, crop, white_balance, demosaic, camera_to_xyz + xyz_to_srgb
-    (stand-in: camera_to_srgb*), gamma (stand-in: srgb_encode*).
-    """
-
-    def __init__(self, method: str):
-        from simcam.stages.base import stage_types
-
-        have = stage_types()
-        nodes = [("normalize", {}), ("lens_shading", {}), ("crop", {}), ("white_balance", {}),
-                 ("demosaic", {"method": method}), ("camera_to_xyz", {}), ("xyz_to_srgb", {}),
-                 ("gamma", {"curve": "srgb"})]
-        standins = {"white_balance": ("white_balance*", _standin_white_balance),
-                    "camera_to_xyz": ("camera_to_srgb*", _standin_camera_to_srgb),
-                    "gamma": ("srgb_encode*", _standin_srgb_encode)}
-        real_colour = all(k in have for k in ("camera_to_xyz", "xyz_to_srgb"))
-        self.stages = []
-        for key, params in nodes:
-            if key == "xyz_to_srgb" and not real_colour:
-                continue  # the camera_to_srgb* stand-in covers both
-            if key in have and (key != "camera_to_xyz" or real_colour):
-                self.stages.append(have[key](**params))
-            else:
-                self.stages.append(_StandinStep(*standins[key]))
-
-
 # -- benchmark -------------------------------------------------------------------------------
 def run_benchmark(h: int, w: int, runs: int, *, workdir: str | Path | None = None, save: str | Path | None = None,
                   dng: str | Path | None = None, out=print) -> dict:
@@ -253,8 +180,8 @@ def run_benchmark(h: int, w: int, runs: int, *, workdir: str | Path | None = Non
             out(f"input: {path}")
         pipes = {m: simcam_pipeline(m) for m in DEMOSAIC_METHODS}
         p0 = pipes[DEMOSAIC_METHODS[0]]
-        how = f"built-in {p0.source}" if getattr(p0, "source", "") else "built in this script"
-        out(f"simcam pipeline ({how}): {[s.type for s in p0.stages]}, demosaic.method = {list(DEMOSAIC_METHODS)}")
+        out(f"simcam pipeline: built-in srgb, stages {[s.type for s in p0.stages]}, "
+            f"demosaic.method in {list(DEMOSAIC_METHODS)}")
         results: dict[str, list[float]] = {}
         cpu: dict[str, list[float]] = {}
         steps: dict[str, dict[str, list[float]]] = {m: {} for m in DEMOSAIC_METHODS}
@@ -328,17 +255,15 @@ def print_tables(h, w, runs, results, cpu, steps, diffs, *, out=print) -> None:
     out("| **sum of steps** | " + " | ".join(
         f"{sum(med(m, k, 0) for k in keys):.3f} | {sum(med(m, k, 1) for k in keys):.3f}" for m in DEMOSAIC_METHODS)
         + " |")
-    if any(k.endswith("*") for k in keys):
-        out("")
-        out("(*) stand-in step written in this script until the colour stages are merged.")
 
 
 def _thread_line() -> str:
     omp = os.environ.get("OMP_NUM_THREADS", f"unset (LibRaw OpenMP uses all {os.cpu_count()} cores)")
     blas = os.environ.get("OPENBLAS_NUM_THREADS", "unset")
+    load = f" 1-min load average at the end: {os.getloadavg()[0]:.1f}." if hasattr(os, "getloadavg") else ""
     return (f"Threads: numpy element-wise kernels single-threaded; OMP_NUM_THREADS={omp}; "
             f"OPENBLAS_NUM_THREADS={blas}. Machine: {platform.processor() or platform.machine()}, "
-            f"{os.cpu_count()} cores; numpy {np.__version__}, rawpy {_rawpy_version()}.")
+            f"{os.cpu_count()} cores; numpy {np.__version__}, rawpy {_rawpy_version()}.{load}")
 
 
 def _rawpy_version() -> str:

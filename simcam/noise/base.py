@@ -191,7 +191,7 @@ def model_types() -> dict[str, type[NoiseModel]]:
 
 
 def _load_builtin() -> None:
-    from . import clipping, composite, gaussian, nlf, poisson_gaussian, poisson_mixture  # noqa: F401
+    from . import clipping, composite, gaussian, nlf, onnx_sampler, poisson_gaussian, poisson_mixture  # noqa: F401
 
 
 def model_from_entry(entry: Any, *, where: str = "model") -> NoiseModel:
@@ -241,12 +241,16 @@ def check_clean(clean: Any, *, where: str = "clean") -> np.ndarray:
         raise NoiseModelError(f"{where}: expected an H x W mosaic, got shape {a.shape}")
     if a.dtype != np.float32:
         a = a.astype(np.float32)
-    if a.size and not np.isfinite(a).all():
+    if not a.size:
+        return a
+    # two reductions without temporaries: min/max are NaN if any value is NaN
+    lo, hi = a.min(), a.max()
+    if not (np.isfinite(lo) and np.isfinite(hi)):
         bad = int(np.size(a) - np.count_nonzero(np.isfinite(a)))
         raise NoiseModelError(f"{where}: expected finite clean values, got {bad} NaN/inf pixel(s)")
-    if a.size and a.min() < 0:
+    if lo < 0:
         raise NoiseModelError(
-            f"{where}: expected clean normalised raw >= 0 (an expected signal cannot be negative), got min {float(a.min()):.6g}")
+            f"{where}: expected clean normalised raw >= 0 (an expected signal cannot be negative), got min {float(lo):.6g}")
     return a
 
 

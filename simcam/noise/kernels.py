@@ -7,7 +7,10 @@
     3x faster than ``Generator.standard_normal(dtype=float32)`` on large blocks.
 
 ``poisson_f32``
-    Exact Poisson counts for an array of means. lambda >= 10: the transformed
+    Exact Poisson counts for an array of means (vectorised numpy; the
+    Poisson-Gaussian models now sample with the faster table kernel of
+    :mod:`simcam.noise.poisson_table`, this remains as an independent exact
+    sampler). lambda >= 10: the transformed
     rejection with squeeze of Hoermann (1993), "The transformed rejection method
     for generating Poisson random variables", Insurance: Mathematics and
     Economics 12, 39-45 (doi:10.1016/0167-6687(93)90997-4), the algorithm numpy

@@ -1,6 +1,7 @@
 """``poisson_gaussian``: ``noisy = beta1 * Poisson(clean / beta1) + N(0, beta2)`` (seed eq. 3.6).
 
-Sampling is exact (:func:`kernels.poisson_f32`, no normal approximation).
+Sampling is exact (:func:`poisson_table.pg_sample_table`: alias tables and a
+compiled kernel, no normal approximation).
 ``log_prob`` sums the Poisson-weighted Gaussian densities
 ``log sum_k Pois(k; lam) N(x; beta1 k, beta2)``, ``lam = clean / beta1``, over a
 window of k: the summand is log-concave in k (a product of two log-concave
@@ -23,7 +24,7 @@ from scipy.special import gammaln, log_ndtr, logsumexp
 
 from ..errors import NoiseModelError
 from .base import NoiseModel, SiteParam, check_clean, check_same_shape, register_model, site_map, site_values, validate_site_param
-from .kernels import _W, normal_f32, poisson_f32
+from .poisson_table import pg_sample_table
 
 #: largest Poisson mean sampled exactly in float32 (integer counts stay exact).
 LAMBDA_MAX = float(2**22)
@@ -40,17 +41,15 @@ def _check_lambda(lam_max: float, beta1_min: float, where: str) -> None:
 
 def pg_sample(clean: np.ndarray, scale, beta2, rng: np.random.Generator, out: np.ndarray, *,
               where: str = "clean") -> np.ndarray:
-    """``out = scale * Poisson(clean / scale) + sqrt(beta2) * z`` (float32 maps or scalars)."""
-    lam = _W.get("pg_lam", clean.size).reshape(clean.shape)
-    np.divide(clean, scale, out=lam)
-    if lam.size:
-        _check_lambda(float(lam.max()), float(np.min(scale)), where)
-    poisson_f32(rng, lam, out=out)
-    out *= scale
-    z = normal_f32(rng, clean.size, out=_W.get("pg_z", clean.size)).reshape(clean.shape)
-    z *= np.sqrt(beta2)
-    out += z
-    return out
+    """``out = scale * Poisson(clean / scale) + sqrt(beta2) * z`` (float32 maps or scalars), exact."""
+    scale = np.asarray(scale, dtype=np.float32)
+    lam_max = 0.0
+    if clean.size:
+        # float32 division is monotone: this bounds every clean / scale of the kernel
+        lam_max = float(np.float32(clean.max()) / np.float32(scale.min()))
+        _check_lambda(lam_max, float(scale.min()), where)
+    sd = np.sqrt(np.asarray(beta2, dtype=np.float32))
+    return pg_sample_table(clean, scale, sd, rng, out, lam_max)
 
 
 def pg_logpdf(x: np.ndarray, lam: np.ndarray, scale: np.ndarray, var: np.ndarray) -> np.ndarray:

@@ -100,12 +100,14 @@ class Normalize(Stage):
             raise MetadataError(
                 f"{meta.source or 'frame'}: WhiteLevel: expected white ({float(white)}) above the black level "
                 f"(max {float(np.max(black))})")
-        if cell is not None:  # per-site constants: broadcast over whole cells, no full-size black map
+        if cell is not None:  # per-site constants: one full-width row pattern per cell row, no H x W map
             (h, w), (r, c) = data.shape, cell.shape
+            data = np.asarray(data, dtype=np.float32)
+            black_rows, scale_rows = np.tile(cell, (1, w // c)), np.tile(scale, (1, w // c))
             out = np.empty((h, w), dtype=np.float32)
-            o4 = out.reshape(h // r, r, w // c, c)
-            np.subtract(np.asarray(data, np.float32).reshape(h // r, r, w // c, c), cell[None, :, None, :], out=o4)
-            np.divide(o4, scale[None, :, None, :], out=o4)
+            for i in range(r):  # contiguous rows: SIMD inner loops
+                np.subtract(data[i::r], black_rows[i], out=out[i::r])
+                np.divide(out[i::r], scale_rows[i], out=out[i::r])
         else:
             out = (data - black) / scale
         return frame.evolve(out.astype(np.float32, copy=False), kind="raw", step=self.type)

@@ -19,6 +19,8 @@ ENTRIES = {
     "clipped": {"type": "clipped", "base": {"type": "nlf", "beta1": 1e-3, "beta2": 1e-5}},
     "composite": {"type": "composite", "base": {"type": "nlf", "beta1": 1e-3, "beta2": 1e-5},
                   "effects": [{"type": "dsnu", "sigma": 1e-3}]},
+    # the shipped default flow (tests/noise/test_flow_profile.py checks its statistics)
+    "noiseflow_onnx": {"type": "noiseflow_onnx", "path": "noiseflow_sidd_gp.onnx", "camera": "GP"},
 }
 
 
@@ -162,12 +164,13 @@ def test_poisson_gaussian_low_lambda_counts_chi_square():
 @pytest.mark.parametrize("name", sorted(ENTRIES))
 def test_same_seed_same_bytes_any_chunking(name):
     m = model_from_entry(ENTRIES[name])
+    cond = NoiseCondition(cfa="RGGB", iso=400.0) if name == "noiseflow_onnx" else COND  # the flow needs an ISO
     clean = np.random.default_rng(0).random((3 * BLOCK_ROWS + 6, 50), dtype=np.float32)
-    a = m.sample(clean, COND, np.random.default_rng(42))
+    a = m.sample(clean, cond, np.random.default_rng(42))
     for chunk, threads in ((1, 1), (BLOCK_ROWS, 1), (45, 3), (1000, 2)):
-        b = m.sample(clean, COND, np.random.default_rng(42), chunk_rows=chunk, threads=threads)
+        b = m.sample(clean, cond, np.random.default_rng(42), chunk_rows=chunk, threads=threads)
         assert a.tobytes() == b.tobytes()
-    c = m.sample(clean, COND, np.random.default_rng(43))
+    c = m.sample(clean, cond, np.random.default_rng(43))
     assert not np.array_equal(a, c)
 
 
