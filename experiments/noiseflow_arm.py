@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 
-def noise_flow_sampler(train_pairs, *, log=print, out=None, epochs: int = 6, patches: int = 3000, seed: int = 0):
+def noise_flow_sampler(train_pairs, *, log=print, out=None, epochs: int = 2, patches: int = 1000, seed: int = 0):
     import torch
 
     from simcam.cfa import pack
