@@ -165,3 +165,23 @@ def test_simcam_noise_models_profile_and_noise_stage_plug_in():
             assert float(d.var()) == pytest.approx(4e-3 * 0.3 + 2e-4, rel=0.06)
         else:
             assert float(d.var()) > 0
+
+
+def test_onnx_noise_flow_sampler(tmp_path):
+    """An exported (untrained, data-free) simcam Noise Flow as a sampler: deterministic, picklable, needs spawn."""
+    pytest.importorskip("onnxruntime")
+    from simcam.dataset.noise_samplers import OnnxFlowNoise
+    from simcam.noise.flow.export import export_onnx
+    from simcam.noise.flow.model import FlowConfig, NoiseFlow
+
+    flow = NoiseFlow(FlowConfig(arch="paper", cameras=["A"], iso_knots=[100.0, 800.0]), seed=0)
+    onnx_path, _ = export_onnx(flow, tmp_path / "model.onnx")
+    sampler = OnnxFlowNoise(str(onnx_path), conds=[(400.0, "A")])
+    ds = NoisyPatchDataset(_clean_sources(1), sampler, length=3, patch_size=8, seed=5)
+    assert ds.needs_spawn
+    a = ds[1]
+    import pickle
+
+    b = pickle.loads(pickle.dumps(ds))[1]  # what a spawned worker computes
+    assert torch.equal(a["noisy"], b["noisy"]) and a["meta"]["iso"] == 400.0
+    assert not torch.equal(a["noisy"], a["clean"])
