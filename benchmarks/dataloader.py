@@ -57,6 +57,9 @@ def main() -> None:
     ap.add_argument("--batches", type=int, default=20)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--flow", type=str, default=None, help="ONNX Noise Flow file for the flow case")
+    ap.add_argument("--flow-iso", type=float, default=800.0)
+    ap.add_argument("--flow-camera", default="0", help="camera name or index of the flow")
+    ap.add_argument("--cases", default="", help="comma-separated substrings: run only matching cases")
     args = ap.parse_args()
 
     import torch
@@ -79,15 +82,18 @@ def main() -> None:
         pass
     flow_note = None
     try:
-        from simcam.noise.onnx_sampler import OnnxFlowNoise  # type: ignore[attr-defined]
+        import simcam.noise.onnx_sampler  # noqa: F401
+        from simcam.dataset.noise_samplers import OnnxFlowNoise
 
         if args.flow:
-            cases.append(("noise-flow (onnx)", OnnxFlowNoise(args.flow)))
+            cases.append(("noise-flow (onnx)", OnnxFlowNoise(args.flow, conds=[(float(args.flow_iso), args.flow_camera)])))
         else:
             flow_note = "noise-flow case skipped: pass --flow PATH.onnx"
     except ImportError:
         flow_note = "noise-flow case skipped: simcam.noise.onnx_sampler not available in this checkout"
 
+    if args.cases:
+        cases = [c for c in cases if any(k in c[0] for k in args.cases.split(","))]
     base = [baseline_rng(p, 50) for _ in range(args.repeats)]
     base_med = statistics.median(b[0] for b in base)
     base_cpu = statistics.median(b[1] for b in base)
