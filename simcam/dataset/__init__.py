@@ -1,0 +1,1 @@
+"""Dataset tools: ground truth from bursts (seed section 5.3)."""
