@@ -20,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import fft as sfft
 from scipy import ndimage, sparse
 from scipy.interpolate import RBFInterpolator
 
@@ -38,15 +39,15 @@ def _prepare(patches: np.ndarray, window: bool) -> np.ndarray:
     p -= p.mean(axis=(-2, -1), keepdims=True)
     if window:
         p *= _window(*p.shape[-2:])
-    return np.fft.fft2(p)
+    return sfft.fft2(p, axes=(-2, -1))  # complex64
 
 
 def _upsampled_dft(data: np.ndarray, region: int, up: int, off_y: np.ndarray, off_x: np.ndarray) -> np.ndarray:
     """Batched matrix-multiply DFT of (B, h, w) spectra on a ``region``^2 grid (Guizar-Sicairos 2008)."""
     B, h, w = data.shape
     u = np.arange(region)[None, :, None]
-    kx = np.exp(-2j * np.pi * (u - off_x[:, None, None]) * np.fft.fftfreq(w, up)[None, None, :])  # (B, U, w)
-    ky = np.exp(-2j * np.pi * (u - off_y[:, None, None]) * np.fft.fftfreq(h, up)[None, None, :])  # (B, U, h)
+    kx = np.exp(-2j * np.pi * (u - off_x[:, None, None]) * np.fft.fftfreq(w, up)[None, None, :]).astype(data.dtype)
+    ky = np.exp(-2j * np.pi * (u - off_y[:, None, None]) * np.fft.fftfreq(h, up)[None, None, :]).astype(data.dtype)
     tmp = np.einsum("bhw,buw->bhu", data, kx)       # (B, h, U)
     return np.einsum("bvh,bhu->bvu", ky, tmp)        # (B, U, U)
 
@@ -61,10 +62,14 @@ def phase_correlation_spectra(F_ref: np.ndarray, F_mov: np.ndarray, *, upsample:
         raise DatasetError(f"phase correlation: normalization: expected 'phase' or None, got {normalization!r}")
     B = R.shape[0]
     h, w = R.shape[-2:]
-    cc = np.fft.ifft2(R).real
+    cc = sfft.ifft2(R, axes=(-2, -1)).real
     flat = cc.reshape(B, -1)
     idx = flat.argmax(axis=1)
-    peak = flat[np.arange(B), idx] / (h * w)
+    # normalised cross-correlation at the integer peak (Parseval: sum x^2 = sum |X|^2 / (h w))
+    plain = flat if normalization is None else sfft.ifft2(F_ref * np.conj(F_mov), axes=(-2, -1)).real.reshape(B, -1)
+    e_ref = (np.abs(F_ref.reshape(B, -1)) ** 2).sum(1) / (h * w)
+    e_mov = (np.abs(F_mov.reshape(B, -1)) ** 2).sum(1) / (h * w)
+    peak = plain[np.arange(B), idx] / np.sqrt(np.maximum(e_ref * e_mov, 1e-300))
     py, px = np.unravel_index(idx, (h, w))
     py = np.where(py > h // 2, py - h, py).astype(np.float64)
     px = np.where(px > w // 2, px - w, px).astype(np.float64)
@@ -120,8 +125,9 @@ def phase_correlation(ref: np.ndarray, mov: np.ndarray, *, upsample: int = 4, wi
     -------
     shift : ndarray, (..., 2)
         (row, col) displacement d with ``mov(p) ~ ref(p - d)``, pixels.
-    peak : ndarray, (...)
-        Height of the correlation peak (a confidence measure).
+    ncc : ndarray, (...)
+        Normalised cross-correlation at the peak, in [-1, 1]: compare it with
+        :func:`ncc_threshold` to tell a real match from a noise maximum.
     """
     ref = np.asarray(ref)
     mov = np.asarray(mov)
@@ -133,6 +139,22 @@ def phase_correlation(ref: np.ndarray, mov: np.ndarray, *, upsample: int = 4, wi
     Fm = _prepare(mov.reshape(-1, h, w), window)
     s, pk = phase_correlation_spectra(Fr, Fm, upsample=upsample, normalization=normalization)
     return s.reshape(lead + (2,)), pk.reshape(lead)
+
+
+def ncc_threshold(h: int, w: int, *, window: bool = True, margin: float = 1.5) -> float:
+    """Largest normalised cross-correlation that white noise alone reaches on h x w patches.
+
+    For independent noise the correlation at each of the h w shifts is about
+    N(0, 1/n_eff), with n_eff = (sum v^2)^2 / sum v^4 for the window v (0.264 h w
+    for a 2-D Hann window); the maximum over all shifts stays below
+    ``(sqrt(2 ln(h w)) + margin) / sqrt(n_eff)`` (extreme-value bound). Patches
+    whose peak does not exceed it carry no usable structure (e.g. a flat field)
+    and are not used as landmarks.
+    """
+    v = _window(h, w).astype(np.float64) if window else np.ones((h, w))
+    v2 = v * v
+    n_eff = v2.sum() ** 2 / (v2 * v2).sum()
+    return float((np.sqrt(2.0 * np.log(h * w)) + margin) / np.sqrt(n_eff))
 
 
 @dataclass
@@ -212,35 +234,49 @@ def prepare_reference(ref: np.ndarray, cfa: str | None, *, patch: int = 512, str
                      tuple(ref.shape), cfa, window, upsample, normalization)
 
 
-def local_shifts(reference: Reference, frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per-patch shifts of ``frame`` against the reference: (landmarks (L, 2), shifts (L, 2)), mosaic pixels."""
+def local_shifts(reference: Reference, frame: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-patch shifts of ``frame`` against the reference.
+
+    Returns landmarks (L, 2) and shifts (L, 2) in mosaic pixels, and a boolean
+    (L,) ``reliable``: the patch's correlation peak exceeds :func:`ncc_threshold`.
+    """
     img = luma(frame, reference.cfa)
     Fm = _prepare(reference.grid.extract(img), reference.window)
-    s, _ = phase_correlation_spectra(reference.F_patches, Fm, upsample=reference.upsample,
-                                     normalization=reference.normalization)
-    return reference.grid.centres, s * reference.grid.step
+    s, ncc = phase_correlation_spectra(reference.F_patches, Fm, upsample=reference.upsample,
+                                       normalization=reference.normalization)
+    g = reference.grid
+    ok = ncc > ncc_threshold(g.size, g.size, window=reference.window)
+    return g.centres, s * g.step, ok
 
 
-def global_shift(reference: Reference, frame: np.ndarray) -> np.ndarray:
-    """One (row, col) shift of the whole frame against the reference, mosaic pixels."""
+def global_shift(reference: Reference, frame: np.ndarray) -> tuple[np.ndarray, bool]:
+    """One (row, col) shift of the whole frame against the reference (mosaic pixels), and its reliability."""
     img = luma(frame, reference.cfa)
     Fm = _prepare(img[None], reference.window)
-    s, _ = phase_correlation_spectra(reference.F_whole[None], Fm, upsample=reference.upsample,
-                                     normalization=reference.normalization)
-    return s[0] * plane_step(reference.cfa)
+    s, ncc = phase_correlation_spectra(reference.F_whole[None], Fm, upsample=reference.upsample,
+                                       normalization=reference.normalization)
+    ok = bool(ncc[0] > ncc_threshold(*img.shape, window=reference.window))
+    return s[0] * plane_step(reference.cfa), ok
 
 
-def reject_outliers(grid: PatchGrid, shifts: np.ndarray, max_dev: float = 1.0) -> tuple[np.ndarray, int]:
-    """Replace landmark shifts that differ from the median of their 3x3 grid neighbours by > ``max_dev`` px."""
+def reject_outliers(grid: PatchGrid, shifts: np.ndarray, reliable: np.ndarray | None = None,
+                    max_dev: float = 1.0) -> np.ndarray:
+    """Landmarks to keep: reliable ones within ``max_dev`` px of the median of their reliable 3x3 neighbours."""
     ny, nx = len(grid.ys), len(grid.xs)
-    if ny * nx < 4:
-        return shifts, 0
-    out = shifts.copy()
-    g = shifts.reshape(ny, nx, 2)
-    med = np.stack([ndimage.median_filter(g[..., c], size=3, mode="nearest") for c in range(2)], axis=-1)
-    bad = np.linalg.norm(g - med, axis=-1) > max_dev
-    out.reshape(ny, nx, 2)[bad] = med[bad]
-    return out, int(bad.sum())
+    ok = np.ones(ny * nx, dtype=bool) if reliable is None else reliable.copy()
+    if ny * nx < 4 or ok.sum() < 3:
+        return ok
+    g = np.where(ok[:, None], shifts, np.nan).reshape(ny, nx, 2)
+    pad = np.pad(g, ((1, 1), (1, 1), (0, 0)), constant_values=np.nan)
+    stack = np.stack([pad[dy:dy + ny, dx:dx + nx] for dy in range(3) for dx in range(3)])
+    with np.errstate(all="ignore"):
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            med = np.nanmedian(stack, axis=0)
+    dev = np.linalg.norm(g - med, axis=-1).ravel()
+    return ok & ~(dev > max_dev)
 
 
 def _interp_matrix(n_out: int, coords: np.ndarray, n_in: int) -> sparse.csr_matrix:
@@ -263,7 +299,7 @@ def dense_field(landmarks: np.ndarray, shifts: np.ndarray, shape: tuple[int, int
     all four planes: the error is |grad d| x 0.5 px, negligible for the smooth
     fields met in bursts). The spline is evaluated on a ``field_step`` grid and
     linearly interpolated from there. Fewer than 3 landmarks (or all on a line)
-    fall back to the mean shift (1 landmark) or a 1-D linear interpolation.
+    fall back to the mean shift or, on a line, a 1-D linear interpolation.
     """
     step = plane_step(cfa)
     H, W = shape
@@ -272,8 +308,9 @@ def dense_field(landmarks: np.ndarray, shifts: np.ndarray, shape: tuple[int, int
     gx = np.arange(0, W + field_step, field_step, dtype=np.float64)
     L = len(landmarks)
     uy, ux = np.unique(landmarks[:, 0]), np.unique(landmarks[:, 1])
-    if L == 1:
-        coarse = np.broadcast_to(shifts[0][:, None, None], (2, gy.size, gx.size)).astype(np.float64)
+    coarse = None
+    if L < 3:
+        coarse = np.broadcast_to(shifts.mean(0)[:, None, None], (2, gy.size, gx.size)).astype(np.float64)
     elif len(uy) == 1 or len(ux) == 1:  # landmarks on a line: 1-D interpolation along it
         along_y = len(ux) == 1
         pos = landmarks[:, 0] if along_y else landmarks[:, 1]
@@ -283,9 +320,12 @@ def dense_field(landmarks: np.ndarray, shifts: np.ndarray, shape: tuple[int, int
         coarse = (prof[:, :, None] * np.ones((1, 1, gx.size)) if along_y
                   else prof[:, None, :] * np.ones((1, gy.size, 1)))
     else:
-        rbf = RBFInterpolator(landmarks, shifts, kernel="thin_plate_spline", smoothing=smoothing, degree=1)
-        yy, xx = np.meshgrid(gy, gx, indexing="ij")
-        coarse = rbf(np.stack([yy.ravel(), xx.ravel()], axis=1)).T.reshape(2, gy.size, gx.size)
+        try:
+            rbf = RBFInterpolator(landmarks, shifts, kernel="thin_plate_spline", smoothing=smoothing, degree=1)
+            yy, xx = np.meshgrid(gy, gx, indexing="ij")
+            coarse = rbf(np.stack([yy.ravel(), xx.ravel()], axis=1)).T.reshape(2, gy.size, gx.size)
+        except (ValueError, np.linalg.LinAlgError):  # degenerate layout (e.g. collinear): mean shift
+            coarse = np.broadcast_to(shifts.mean(0)[:, None, None], (2, gy.size, gx.size)).astype(np.float64)
     cy = (np.arange(hp) * step + (step - 1) / 2.0) / field_step
     cx = (np.arange(wp) * step + (step - 1) / 2.0) / field_step
     Ay = _interp_matrix(hp, cy, gy.size)
@@ -307,7 +347,7 @@ def constant_field(shift: np.ndarray, shape: tuple[int, int], cfa: str | None) -
 
 
 def warp(data: np.ndarray, field: np.ndarray, cfa: str | None, *, order: int = 3,
-         mode: str = "nearest") -> np.ndarray:
+         mode: str = "nearest", threads: int = 2) -> np.ndarray:
     """Warp each CFA plane by ``field`` (mosaic pixels): ``out(p) = data(p + d(p))`` within the plane.
 
     ``order`` is the spline order of :func:`scipy.ndimage.map_coordinates`
@@ -316,15 +356,26 @@ def warp(data: np.ndarray, field: np.ndarray, cfa: str | None, *, order: int = 3
     """
     step = plane_step(cfa)
     out = np.empty(data.shape, dtype=np.float32 if order else data.dtype)
-    for dy, dx in plane_offsets(cfa):
+
+    def one(off):
+        dy, dx = off
         p = data[dy::step, dx::step]
         h, w = p.shape
         f = field[:, :h, :w]
         coords = np.empty((2, h, w), dtype=np.float32)
         coords[0] = np.arange(h, dtype=np.float32)[:, None] + f[0] / step
         coords[1] = np.arange(w, dtype=np.float32)[None, :] + f[1] / step
-        out[dy::step, dx::step] = ndimage.map_coordinates(p, coords, order=order, mode=mode,
-                                                          output=out.dtype)
+        out[dy::step, dx::step] = ndimage.map_coordinates(p, coords, order=order, mode=mode, output=out.dtype)
+
+    offs = plane_offsets(cfa)
+    if len(offs) > 1 and threads > 1:  # map_coordinates releases the GIL; planes are independent
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(min(threads, len(offs))) as ex:
+            list(ex.map(one, offs))
+    else:
+        for off in offs:
+            one(off)
     return out
 
 

@@ -45,7 +45,7 @@ class GroundTruthConfig:
     upsample: int = 4                 #: correlation grid 1/upsample px around the peak, then a parabola
     normalization: str | None = None  #: cross-power normalisation: None (cross-correlation) or "phase"
     tps_smoothing: float = 0.0        #: RBFInterpolator smoothing of the thin-plate spline
-    outlier_px: float = 1.0           #: landmark shifts this far from their 3x3 median are replaced
+    outlier_px: float = 1.0           #: landmark shifts this far from their 3x3 median are dropped
     interp_order: int = 3             #: warp interpolation: 3 cubic, 1 linear
     intensity: str = "additive"       #: eq. 5.4 (additive), multiplicative, or none
     drop_outliers: bool = True        #: drop frames whose mean is outside the confidence interval
@@ -289,14 +289,23 @@ def _run(burst, cfg, store, shape, cfa, lo, hi, dmap, dmask, timing, t0, progres
         fieldmap = None
         if reference is not None and i != ref_idx:
             if cfg.alignment == "local":
-                lm, sh = local_shifts(reference, x)
-                sh, n_out = reject_outliers(reference.grid, sh, cfg.outlier_px)
-                fieldmap = dense_field(lm, sh, shape, cfa, smoothing=cfg.tps_smoothing)
-                info["landmark_outliers"] = n_out
+                lm, sh, rel = local_shifts(reference, x)
+                keep = reject_outliers(reference.grid, sh, rel, cfg.outlier_px)
+                info["landmarks_unreliable"] = int((~rel).sum())
+                info["landmarks_rejected"] = int((rel & ~keep).sum())
+                if keep.any():
+                    fieldmap = dense_field(lm[keep], sh[keep], shape, cfa, smoothing=cfg.tps_smoothing)
+                else:  # no structure to register against: leave the frame where it is
+                    fieldmap = constant_field(np.zeros(2), shape, cfa)
             else:
-                fieldmap = constant_field(global_shift(reference, x), shape, cfa)
+                shift, ok = global_shift(reference, x)
+                info["unreliable"] = not ok
+                fieldmap = constant_field(shift if ok else np.zeros(2), shape, cfa)
             info.update(field_stats(fieldmap))
-            x = warp(x, fieldmap, cfa, order=cfg.interp_order)
+            if info["max_px"] > 0:
+                x = warp(x, fieldmap, cfa, order=cfg.interp_order)
+            else:
+                fieldmap = None
         per_frame.append(info)
         if censor:
             low = raw <= lo + _EPS
