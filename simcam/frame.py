@@ -58,8 +58,10 @@ class GainMap:
     shape (map_points_v, map_points_h, map_planes), float32, dimensionless gain.
     The map sample (i, j) sits at image position
     (origin_v + i*spacing_v, origin_h + j*spacing_h) in *relative* units of the
-    rectangle (top, left, bottom, right): 0 is the top/left edge, 1 the
-    bottom/right edge.
+    whole image the list applies to (0 its top/left edge, 1 its bottom/right
+    edge; pixel (y, x) has its centre at ((y + 0.5) / H, (x + 0.5) / W)), as
+    the DNG SDK's ``dng_gain_map_interpolator`` computes it; (top, left,
+    bottom, right) with the pitches only selects the pixels the map touches.
     """
 
     top: int

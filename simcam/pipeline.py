@@ -212,15 +212,18 @@ def _describe_validation_error(exc: ValidationError, params: dict[str, Any]) -> 
         return f"{loc}: unknown parameter (value {value!r})"
     hint = ""
     if isinstance(value, str) and _FLOATISH.match(value.strip()):
-        hint = (f"; {value!r} is a string because YAML 1.1 (PyYAML) reads exponent floats without a dot as text: "
-                f"write it with a dot, e.g. {_dotted(value)}")
+        hint = (f"; {value!r} is a string because YAML 1.1 (PyYAML) reads exponent floats without a dot and a signed exponent as text: "
+                f"write {_dotted(value)}")
     return f"{loc}: {msg}, got {value!r}{hint}"
 
 
 def _dotted(value: str) -> str:
-    mant, _, exp = value.lower().partition("e")
+    """The YAML 1.1 float spelling of ``value``: a dot in the mantissa, a signed exponent."""
+    mant, _, exp = value.strip().lower().partition("e")
     if "." not in mant:
         mant += ".0"
+    if exp[:1] not in "+-":
+        exp = "+" + exp
     return f"{mant}e{exp}"
 
 

@@ -38,13 +38,14 @@ def render(
     seed: int = typer.Option(0, "--seed", help="Seed for random stages (noise)."),
 ) -> None:
     """Render a raw DNG through a pipeline to PNG / TIFF / EXR."""
-    from ..io.dng import read_dng
     from ..io.images import resolve_depth, write_image
     from ..pipeline import Pipeline
 
+    overrides = parse_set_options(set_)
     resolve_depth(output, depth)  # fail on a bad format before any work
     pipe = Pipeline.from_yaml(pipeline)
-    overrides = parse_set_options(set_)
+    from ..io.dng import read_dng
+
     if overrides:
         pipe = pipe.with_overrides(overrides)
     frame = read_dng(input)

@@ -8,12 +8,12 @@ overwritten.
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import ImageIOError
+from .atomic import atomic_output
 
 #: Allowed sample types per file extension; the first is the default.
 FORMAT_DEPTHS = {
@@ -85,9 +85,7 @@ def write_image(path: str | Path, data: np.ndarray, *, depth: str | int | None =
         spec.attribute(k, v)
     if not path.parent.exists():
         raise ImageIOError(f"{path}: output folder {path.parent} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}-", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
+    with atomic_output(path, suffix=path.suffix) as tmp:
         out = oiio.ImageOutput.create(tmp)
         if out is None or not out.open(tmp, spec):
             raise ImageIOError(f"{path}: cannot open for writing ({oiio.geterror() or (out and out.geterror())})")
@@ -95,10 +93,6 @@ def write_image(path: str | Path, data: np.ndarray, *, depth: str | int | None =
         out.close()
         if not ok:
             raise ImageIOError(f"{path}: write failed ({out.geterror()})")
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
     return path
 
 

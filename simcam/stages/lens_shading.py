@@ -1,0 +1,149 @@
+"""Lens-shading correction from DNG GainMap opcodes (stage ``lens_shading``).
+
+LibRaw does not apply OpcodeList2 (DESIGN.md, section 6), so smartphone and
+action-camera lens shading is applied here, per Bayer phase, exactly as the
+DNG SDK's ``dng_opcode_GainMap`` does (DNG 1.6 spec, section 7, opcode 9;
+SDK ``dng_gain_map_interpolator``):
+
+* the opcode list applies to the stage-2 image, i.e. the active area; pixel
+  (y, x) below is relative to the active area's top-left;
+* a map selects the pixels ``y = Top, Top + RowPitch, ... < Bottom`` and
+  ``x = Left, Left + ColPitch, ... < Right`` (so four maps with pitch 2 and
+  Top/Left in {0, 1} cover the four Bayer phases) of plane ``Plane`` (a mosaic
+  has one plane, so only maps with ``Plane == 0`` apply);
+* the map position of a pixel centre is, in relative image coordinates,
+  ``v = (y + 0.5) / H``, ``u = (x + 0.5) / W`` (H x W: the active area), and
+  its fractional map index ``(v - MapOriginV) / MapSpacingV`` (same for u);
+* gains are bilinearly interpolated between map points and clamped to the
+  edge points outside the map.
+
+Unlike the SDK, which works on [0, 1] data and clips ``x * gain`` at 1, the
+result is not clipped (normalised raw keeps values above 1 and below 0).
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from pydantic import Field
+
+from ..errors import MetadataError
+from ..frame import CameraMeta, GainMap, RawFrame
+from .base import Stage, StageParams, register_stage
+
+
+def opcode_image_bounds(meta: CameraMeta, shape: tuple[int, int]) -> tuple[int, int, int, int]:
+    """(top, left, height, width) of the image OpcodeList2 applies to, in stored-image pixels.
+
+    That image is the active area; without an ActiveArea tag it is the whole
+    stored image (its size from ``meta.extra["image_size"]``, or the frame's
+    shape when ``meta.origin`` is (0, 0)).
+    """
+    if meta.active_area is not None:
+        t, l, b, r = (int(v) for v in meta.active_area)
+        return t, l, b - t, r - l
+    size = meta.extra.get("image_size") if isinstance(meta.extra, dict) else None
+    if size is not None:
+        return 0, 0, int(size[0]), int(size[1])
+    if tuple(meta.origin) == (0, 0):
+        return 0, 0, int(shape[0]), int(shape[1])
+    raise MetadataError(
+        f"{meta.source or 'frame'}: active_area: None on a frame cropped at origin {tuple(meta.origin)}; "
+        f"expected the active area (or extra['image_size']) to place the GainMaps")
+
+
+def _map_axis(pos: np.ndarray, size: int, origin: float, spacing: float, n: int):
+    """Indices (i1, i2) and weights of the DNG SDK interpolator along one axis.
+
+    ``pos`` are pixel positions in the opcode image, ``size`` its extent.
+    """
+    if n == 1:  # the SDK resets spacing/origin of a 1-point axis
+        zeros = np.zeros(pos.shape, dtype=np.int64)
+        return zeros, zeros, np.zeros(pos.shape, dtype=np.float64)
+    f = ((pos + 0.5) / size - origin) / spacing
+    i1 = np.floor(np.maximum(f, 0.0)).astype(np.int64)
+    frac = np.where(f <= 0.0, 0.0, f - i1)
+    top = i1 >= n - 1
+    i1 = np.where(top, n - 1, i1)
+    frac = np.where(top, 0.0, frac)
+    i2 = np.minimum(i1 + 1, n - 1)
+    return i1, i2, frac
+
+
+def gain_map_selection(gm: GainMap, meta: CameraMeta, shape: tuple[int, int]):
+    """Rows, columns (of the frame) a GainMap touches and the gain at each (rows x cols).
+
+    Returns
+    -------
+    rows, cols : ndarray of int
+        Frame indices selected by Top/Bottom/RowPitch and Left/Right/ColPitch.
+    gain : ndarray, float64, shape (len(rows), len(cols))
+        Bilinearly interpolated map value (plane ``min(Plane, MapPlanes-1)``).
+    """
+    h, w = shape
+    at, al, ih, iw = opcode_image_bounds(meta, shape)
+    oy, ox = meta.origin
+    y = np.arange(h) + (oy - at)  # position of each frame row in the opcode image
+    x = np.arange(w) + (ox - al)
+    rp, cp = max(int(gm.row_pitch), 1), max(int(gm.col_pitch), 1)
+    rsel = (y >= gm.top) & (y < gm.bottom) & ((y - gm.top) % rp == 0)
+    csel = (x >= gm.left) & (x < gm.right) & ((x - gm.left) % cp == 0)
+    rows, cols = np.nonzero(rsel)[0], np.nonzero(csel)[0]
+    g = np.asarray(gm.gains, dtype=np.float64)
+    plane = min(int(gm.plane), g.shape[2] - 1)
+    g = g[:, :, plane]
+    nv, nh = g.shape
+    i1, i2, fr = _map_axis(y[rows].astype(np.float64), ih, gm.map_origin_v, gm.map_spacing_v, nv)
+    j1, j2, fc = _map_axis(x[cols].astype(np.float64), iw, gm.map_origin_h, gm.map_spacing_h, nh)
+    # bilinear interpolation is separable: columns on the (few) map rows first, then rows
+    gc = g[:, j1] * (1.0 - fc) + g[:, j2] * fc  # (nv, len(cols))
+    fr = fr[:, None]
+    return rows, cols, gc[i1] * (1.0 - fr) + gc[i2] * fr
+
+
+def _as_slice(idx: np.ndarray, pitch: int) -> slice:
+    """The arithmetic progression ``idx`` (step = pitch) as a slice (views, no fancy indexing)."""
+    return slice(int(idx[0]), int(idx[-1]) + 1, max(int(pitch), 1))
+
+
+def gain_field(meta: CameraMeta, shape: tuple[int, int], list_index: int = 2) -> np.ndarray:
+    """The total multiplicative gain (H x W, float32) of the mosaic GainMaps of an opcode list."""
+    field = np.ones(shape, dtype=np.float64)
+    for gm in meta.gain_maps(list_index):
+        if gm.plane != 0:  # a mosaic has a single plane (SDK: plane < buffer.Planes())
+            continue
+        rows, cols, gain = gain_map_selection(gm, meta, shape)
+        if rows.size and cols.size:
+            field[_as_slice(rows, gm.row_pitch), _as_slice(cols, gm.col_pitch)] *= gain
+    return field.astype(np.float32)
+
+
+@register_stage
+class LensShading(Stage):
+    """Apply the OpcodeList2 GainMaps (lens-shading / colour-shading correction) to a mosaic.
+
+    ``strength`` blends each gain towards 1: ``g' = 1 + strength * (g - 1)``
+    (1 = the file's full correction, 0 = none). Frames without GainMaps pass
+    through unchanged.
+    """
+
+    type = "lens_shading"
+    accepts = frozenset({"raw"})
+
+    class Params(StageParams):
+        source: Literal["opcodes"] = "opcodes"
+        strength: float = Field(1.0, ge=0.0, le=1.0)
+
+    def apply(self, frame: RawFrame, drawn=None) -> RawFrame:
+        maps = [gm for gm in frame.meta.gain_maps(2) if gm.plane == 0]
+        if not maps:
+            return frame.evolve(step=f"{self.type}(no GainMaps)")
+        s = float(self.params.strength)
+        out = np.array(frame.data, dtype=np.float32, copy=True)
+        for gm in maps:
+            rows, cols, gain = gain_map_selection(gm, frame.meta, out.shape)
+            if rows.size and cols.size:
+                g = (1.0 + s * (gain - 1.0)).astype(np.float32)
+                out[_as_slice(rows, gm.row_pitch), _as_slice(cols, gm.col_pitch)] *= g
+        return frame.evolve(out, step=self.type)
