@@ -239,14 +239,9 @@ def load_defect_map(path: str | Path, shape: tuple[int, int] | None = None) -> D
         raise DatasetError(f"{path}: defect map not found")
     try:
         if path.suffix.lower() == ".mat":
-            from scipy.io import loadmat
+            from ...io.sidd import load_defect_mask
 
-            d = loadmat(path)
-            keys = [k for k in d if not k.startswith("__")]
-            key = "DefectivePixelsMask" if "DefectivePixelsMask" in d else (keys[0] if len(keys) == 1 else None)
-            if key is None:
-                raise DatasetError(f"{path}: expected a variable DefectivePixelsMask, found {keys}")
-            dm = DefectMap(np.asarray(d[key]) != 0, str(path))
+            dm = DefectMap(load_defect_mask(path), str(path))
         else:
             with np.load(path, allow_pickle=False) as z:
                 if "mask" not in z:

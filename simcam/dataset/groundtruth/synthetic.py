@@ -6,7 +6,8 @@ exactly under any drift. Frame i sees the scene displaced by a smooth field
 ``d_i(p) = t_i D(p)`` (an OIS-like coaxial shift plus a radial term, seed 5.3.3),
 scaled by a flicker gain ``g_i``, with hot pixels added, then NLF noise
 ``var = beta1 y + beta2`` (seed eq. 5.2) and clipping to [clip_low, 1] (eq. 5.3).
-Randomness: frame i draws from ``SeedSequence([seed, i])``; the scene from ``[seed]``.
+Randomness: frame i draws from ``SeedSequence([seed, i])``, dark frame i from ``[seed, 10000 + i]``,
+the scene from ``[seed]``, the hot pixels from ``[seed, 999999]``.
 """
 
 from __future__ import annotations
@@ -104,8 +105,9 @@ class SyntheticBurst:
         self.gains = 1.0 + self.flicker_sd * rng.standard_normal(self.n)
         for i, g in self.outliers.items():
             self.gains[int(i)] = float(g)
-        self.hot = rng.random(self.shape) < self.hot_fraction
-        self.hot_level = np.where(self.hot, rng.uniform(*self.hot_range, self.shape), 0.0).astype(np.float32)
+        rh = np.random.default_rng(np.random.SeedSequence([self.seed, 999_999]))  # sensor: independent of n
+        self.hot = rh.random(self.shape) < self.hot_fraction
+        self.hot_level = np.where(self.hot, rh.uniform(*self.hot_range, self.shape), 0.0).astype(np.float32)
 
     # -- geometry ------------------------------------------------------------------------------
     def drift_pattern(self, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
@@ -170,3 +172,32 @@ class SyntheticBurst:
         rng = np.random.default_rng(np.random.SeedSequence([self.seed, 10_000 + int(i)]))
         x = self.hot_level + np.sqrt(self.beta2) * rng.standard_normal(self.shape)
         return np.clip(x, self.clip_low, 1.0).astype(np.float32)
+
+
+def write_dng_burst(sb: SyntheticBurst, directory, *, black: float = 0.0, white: float = 4095.0, iso: float = 100.0,
+                    exposure_time_s: float = 0.01, dark: int = 0, frames=None) -> list:
+    """Write the burst's frames (and ``dark`` dark frames) as DNGs ``frame_000.dng``... / ``dark_000.dng``.
+
+    Frames are quantised to DN with ``black``/``white``; ``sb.clip_low`` should
+    be ``-black / (white - black)`` so that clipping happens at DN 0 like a sensor.
+    Returns the written paths (frames, then darks).
+    """
+    from pathlib import Path
+
+    from ...frame import CameraMeta, RawFrame
+    from ...io.dng_write import write_dng
+
+    if sb.cfa is None:
+        raise ValueError("write_dng_burst: DNG needs a Bayer pattern")
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    meta = CameraMeta(make="simcam", model="synthetic burst", cfa=sb.cfa, black_level=np.array([[float(black)]]),
+                      white_level=float(white), iso=float(iso), exposure_time_s=float(exposure_time_s),
+                      noise_profile=np.array([[sb.beta1, sb.beta2]]))
+    out = []
+    idx = range(sb.n) if frames is None else frames
+    for i in idx:
+        out.append(write_dng(directory / f"frame_{i:03d}.dng", RawFrame(sb.frame(i), meta, kind="raw")))
+    for i in range(dark):
+        out.append(write_dng(directory / f"dark_{i:03d}.dng", RawFrame(sb.dark(i), meta, kind="raw")))
+    return out
