@@ -110,3 +110,14 @@ def test_fallbacks_and_missing_samples():
         assert r.valid[4] and r.n_used[4] == 3            # NaN is a missing sample, not a censored one
     with pytest.raises(DatasetError):
         robust_mean(x, "median")
+
+
+def test_uncensored_mean_hybrid():
+    rng = np.random.default_rng(7)
+    x = _burst(rng.uniform(0, 1, 2000), 0.02, 20, rng)
+    h = robust_mean(x, "wls", uncensored_mean=True)
+    w, pm = wls_cdf_fit(x), plain_mean(x)
+    cens = ((x <= 0) | (x >= 1)).any(0)
+    assert cens.any() and (~cens).any()
+    np.testing.assert_array_equal(h.mu[~cens], pm.mu[~cens])
+    np.testing.assert_array_equal(h.mu[cens], w.mu[cens])

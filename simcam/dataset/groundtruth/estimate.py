@@ -38,6 +38,7 @@ class GroundTruthConfig:
 
     method: str = "wls"               #: robust mean: wls (seed), mle (censored MLE) or mean (plain)
     refine: int = 0                   #: Gauss-Newton steps on eq. 5.10 after the closed form (wls)
+    uncensored_mean: bool = True      #: pixels without censored samples get the plain mean (efficient)
     min_samples: int = 3              #: fewest uncensored samples for a fit; fewer -> fallback, invalid
     alignment: str = "local"          #: local (TPS from patch shifts), global (one shift), none
     patch: int = 512                  #: patch size, mosaic pixels (seed: 512); shrinks for small frames
@@ -336,6 +337,8 @@ def _run(burst, cfg, store, shape, cfa, lo, hi, dmap, dmask, timing, t0, progres
     n_cens = np.empty(shape, dtype=np.int16)
     rows = max(1, int(cfg.tile_pixels) // W)
     kw: dict[str, Any] = {"min_samples": cfg.min_samples}
+    if cfg.method != "mean":
+        kw["uncensored_mean"] = cfg.uncensored_mean
     if cfg.method == "wls":
         kw["refine"] = cfg.refine
     # censored samples are marked +-inf above, so the clip points themselves only matter for MLE
@@ -379,6 +382,7 @@ def _run(burst, cfg, store, shape, cfa, lo, hi, dmap, dmask, timing, t0, progres
             "per_frame": per_frame,
         },
         "robust_mean": {"method": cfg.method, "refine": cfg.refine if cfg.method == "wls" else None,
+                        "uncensored_mean": cfg.uncensored_mean if cfg.method != "mean" else None,
                         "pixels_with_censored_samples": int(np.count_nonzero(n_cens)),
                         "fallback_pixels": int(np.count_nonzero(~valid)),
                         "median_sigma": float(np.median(sigma))},

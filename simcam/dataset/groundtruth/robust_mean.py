@@ -406,17 +406,34 @@ def plain_mean(samples: np.ndarray, *, lo: float = 0.0, hi: float = 1.0, min_sam
 
 
 def robust_mean(samples: np.ndarray, method: str = "wls", *, lo: float = 0.0, hi: float = 1.0,
-                **kw) -> RobustMean:
+                uncensored_mean: bool = False, **kw) -> RobustMean:
     """Dispatch to :func:`wls_cdf_fit`, :func:`censored_mle` or :func:`plain_mean`.
+
+    ``uncensored_mean=True`` fits (``wls``/``mle``) only the pixels that have a
+    censored or missing sample and gives the others their plain mean and
+    standard deviation: without censoring the mean is the minimum-variance
+    unbiased estimate, while the WLS CDF fit (an L-estimator) has ~94 %
+    efficiency (variance ratio measured 1.06, see the tests).
 
     Fallback (``wls``/``mle``) where fewer than ``min_samples`` (default 3)
     samples are uncensored: all high-censored -> ``hi``, all low-censored ->
     ``lo``, otherwise the plain mean clipped to [lo, hi]; ``valid`` is False there.
     """
-    if method == "wls":
-        return wls_cdf_fit(samples, lo=lo, hi=hi, **kw)
-    if method == "mle":
-        return censored_mle(samples, lo=lo, hi=hi, **kw)
+    if method in ("wls", "mle"):
+        fn = wls_cdf_fit if method == "wls" else censored_mle
+        if not uncensored_mean:
+            return fn(samples, lo=lo, hi=hi, **kw)
+        axis = kw.pop("axis", 0)
+        x = _check_samples(samples, axis)
+        fin = ~np.isnan(x)
+        cens = (fin & ((x <= lo) | (x >= hi))).any(1) | ~fin.all(1)
+        res = plain_mean(x, lo=lo, hi=hi, axis=1)
+        res.valid = res.valid & (res.n_used >= max(int(kw.get("min_samples", 3)), 2))
+        if cens.any():
+            sub = fn(x[cens], lo=lo, hi=hi, axis=1, **kw)
+            for f in ("mu", "sigma", "n_used", "n_low", "n_high", "valid"):
+                getattr(res, f)[cens] = getattr(sub, f)
+        return res
     if method == "mean":
         return plain_mean(samples, lo=lo, hi=hi, **{k: v for k, v in kw.items() if k in ("min_samples", "axis")})
     raise DatasetError(f"robust_mean: method: expected one of {METHODS}, got {method!r}")
