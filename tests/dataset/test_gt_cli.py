@@ -3,10 +3,9 @@
 import json
 
 import numpy as np
-import pytest
 
 from simcam.cli import main
-from simcam.dataset.groundtruth import Burst, GroundTruthConfig, SyntheticBurst, estimate_ground_truth
+from simcam.dataset.groundtruth import Burst, SyntheticBurst, estimate_ground_truth
 from simcam.dataset.groundtruth.synthetic import write_dng_burst
 
 

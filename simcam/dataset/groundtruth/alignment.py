@@ -39,47 +39,76 @@ def _prepare(patches: np.ndarray, window: bool) -> np.ndarray:
     p -= p.mean(axis=(-2, -1), keepdims=True)
     if window:
         p *= _window(*p.shape[-2:])
-    return sfft.fft2(p, axes=(-2, -1))  # complex64
+    return sfft.rfft2(p, axes=(-2, -1))  # complex64, half spectrum (real input)
 
 
-def _upsampled_dft(data: np.ndarray, region: int, up: int, off_y: np.ndarray, off_x: np.ndarray) -> np.ndarray:
-    """Batched matrix-multiply DFT of (B, h, w) spectra on a ``region``^2 grid (Guizar-Sicairos 2008)."""
-    B, h, w = data.shape
-    u = np.arange(region)[None, :, None]
-    kx = np.exp(-2j * np.pi * (u - off_x[:, None, None]) * np.fft.fftfreq(w, up)[None, None, :]).astype(data.dtype)
-    ky = np.exp(-2j * np.pi * (u - off_y[:, None, None]) * np.fft.fftfreq(h, up)[None, None, :]).astype(data.dtype)
-    tmp = np.einsum("bhw,buw->bhu", data, kx)       # (B, h, U)
-    return np.einsum("bvh,bhu->bvu", ky, tmp)        # (B, U, U)
+def _half_weights(w: int) -> np.ndarray:
+    """Weights that turn sums over a real signal's half spectrum (rfft, length w//2+1) into full sums."""
+    k = np.full(w // 2 + 1, 2.0)
+    k[0] = 1.0
+    if w % 2 == 0:
+        k[-1] = 1.0
+    return k
+
+
+def _upsampled_dft(data: np.ndarray, region: int, up: int, off_y: np.ndarray, off_x: np.ndarray,
+                   w: int) -> np.ndarray:
+    """Real part of the batched matrix-multiply DFT of Hermitian spectra on a ``region``^2 grid.
+
+    ``data`` is (B, h, w//2+1), the rfft half of spectra of real signals of width ``w``
+    (Guizar-Sicairos 2008, using the half spectrum: the other half adds the complex
+    conjugate, so the real part is the weighted half sum). The kernel
+    exp(2 pi i (u - off_b) f_k / up) factors into a batch-independent matrix and a
+    per-batch phase applied to the data, so both stages are single BLAS products.
+    """
+    B, h, wh = data.shape
+    fx = np.arange(wh) / (w * up)
+    fy = np.fft.fftfreq(h, up)
+    u = np.arange(region)[:, None]
+    ex = np.exp(2j * np.pi * u * fx[None, :]).astype(data.dtype)            # (U, wh)
+    ey = np.exp(2j * np.pi * u * fy[None, :]).astype(data.dtype)            # (U, h)
+    px = (np.exp(-2j * np.pi * off_x[:, None] * fx[None, :]) * _half_weights(w)).astype(data.dtype)  # (B, wh)
+    py = np.exp(-2j * np.pi * off_y[:, None] * fy[None, :]).astype(data.dtype)                       # (B, h)
+    tmp = ((data * px[:, None, :]).reshape(B * h, wh) @ ex.T).reshape(B, h, region)   # (B, h, U)
+    tmp = tmp * py[:, :, None]
+    out = ey @ np.ascontiguousarray(tmp.transpose(1, 0, 2)).reshape(h, B * region)    # (U, B*U)
+    return np.ascontiguousarray(out.reshape(region, B, region).transpose(1, 0, 2)).real / (h * w)
 
 
 def phase_correlation_spectra(F_ref: np.ndarray, F_mov: np.ndarray, *, upsample: int = 4,
-                              normalization: str | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Sub-pixel shifts between batches of prepared spectra (see :func:`phase_correlation`)."""
+                              normalization: str | None = None, width: int | None = None
+                              ) -> tuple[np.ndarray, np.ndarray]:
+    """Sub-pixel shifts between batches of prepared (rfft2) spectra (see :func:`phase_correlation`).
+
+    ``width`` is the patches' width (needed when it is odd; default ``2 (w_half - 1)``).
+    """
     R = F_ref * np.conj(F_mov)
     if normalization == "phase":
         R = R / np.maximum(np.abs(R), 1e-30)
     elif normalization is not None:
         raise DatasetError(f"phase correlation: normalization: expected 'phase' or None, got {normalization!r}")
     B = R.shape[0]
-    h, w = R.shape[-2:]
-    cc = sfft.ifft2(R, axes=(-2, -1)).real
+    h = R.shape[-2]
+    w = width if width is not None else 2 * (R.shape[-1] - 1)
+    cc = sfft.irfft2(R, s=(h, w), axes=(-2, -1))
     flat = cc.reshape(B, -1)
     idx = flat.argmax(axis=1)
     # normalised cross-correlation at the integer peak (Parseval: sum x^2 = sum |X|^2 / (h w))
-    plain = flat if normalization is None else sfft.ifft2(F_ref * np.conj(F_mov), axes=(-2, -1)).real.reshape(B, -1)
-    e_ref = (np.abs(F_ref.reshape(B, -1)) ** 2).sum(1) / (h * w)
-    e_mov = (np.abs(F_mov.reshape(B, -1)) ** 2).sum(1) / (h * w)
+    plain = flat if normalization is None else sfft.irfft2(F_ref * np.conj(F_mov), s=(h, w), axes=(-2, -1)).reshape(B, -1)
+    hw = _half_weights(w)
+    e_ref = ((np.abs(F_ref) ** 2) * hw).reshape(B, -1).sum(1) / (h * w)
+    e_mov = ((np.abs(F_mov) ** 2) * hw).reshape(B, -1).sum(1) / (h * w)
     peak = plain[np.arange(B), idx] / np.sqrt(np.maximum(e_ref * e_mov, 1e-300))
     py, px = np.unravel_index(idx, (h, w))
     py = np.where(py > h // 2, py - h, py).astype(np.float64)
     px = np.where(px > w // 2, px - w, px).astype(np.float64)
     if upsample > 1:
-        # upsampled DFT on a 1/upsample grid over +-0.75 px around the integer peak, then a
+        # correlation on a 1/upsample grid over +-0.75 px around the integer peak (upsampled DFT), then a
         # 3-point parabola through the grid maximum and its neighbours along each axis
         region = int(np.ceil(1.5 * upsample)) | 1
         c = float(region // 2)
         off_y, off_x = c - py * upsample, c - px * upsample
-        up = _upsampled_dft(np.conj(R), region, upsample, off_y, off_x).conj().real
+        up = _upsampled_dft(R, region, upsample, off_y, off_x, w)
         k = up.reshape(B, -1).argmax(axis=1)
         uy, ux = np.unravel_index(k, (region, region))
         b = np.arange(B)
@@ -137,7 +166,7 @@ def phase_correlation(ref: np.ndarray, mov: np.ndarray, *, upsample: int = 4, wi
     h, w = ref.shape[-2:]
     Fr = _prepare(ref.reshape(-1, h, w), window)
     Fm = _prepare(mov.reshape(-1, h, w), window)
-    s, pk = phase_correlation_spectra(Fr, Fm, upsample=upsample, normalization=normalization)
+    s, pk = phase_correlation_spectra(Fr, Fm, upsample=upsample, normalization=normalization, width=w)
     return s.reshape(lead + (2,)), pk.reshape(lead)
 
 
@@ -243,7 +272,7 @@ def local_shifts(reference: Reference, frame: np.ndarray) -> tuple[np.ndarray, n
     img = luma(frame, reference.cfa)
     Fm = _prepare(reference.grid.extract(img), reference.window)
     s, ncc = phase_correlation_spectra(reference.F_patches, Fm, upsample=reference.upsample,
-                                       normalization=reference.normalization)
+                                       normalization=reference.normalization, width=reference.grid.size)
     g = reference.grid
     ok = ncc > ncc_threshold(g.size, g.size, window=reference.window)
     return g.centres, s * g.step, ok
@@ -254,7 +283,7 @@ def global_shift(reference: Reference, frame: np.ndarray) -> tuple[np.ndarray, b
     img = luma(frame, reference.cfa)
     Fm = _prepare(img[None], reference.window)
     s, ncc = phase_correlation_spectra(reference.F_whole[None], Fm, upsample=reference.upsample,
-                                       normalization=reference.normalization)
+                                       normalization=reference.normalization, width=img.shape[1])
     ok = bool(ncc[0] > ncc_threshold(*img.shape, window=reference.window))
     return s[0] * plane_step(reference.cfa), ok
 

@@ -175,10 +175,12 @@ def wls_cdf_fit(samples: np.ndarray, *, lo: float = 0.0, hi: float = 1.0, refine
         mu = np.where(ok, (Sx - sigma * Sz) / np.where(S0 > 0, S0, 1.0), 0.0)
     sigma = np.maximum(sigma, 0.0)
     if refine > 0 and ok.any():
-        sel = np.nonzero(ok & (sigma > 0))[0]
-        Fsel, _, _ = _positions(n_fin[sel][:, None], N)
-        mu_s, sg_s = _gauss_newton(xs[sel].astype(np.float64), m[sel], Fsel, mu[sel], sigma[sel], refine)
-        mu[sel], sigma[sel] = mu_s, sg_s
+        sel_all = np.nonzero(ok & (sigma > 0))[0]
+        for c0 in range(0, sel_all.size, 16384):  # bounded float64 temporaries
+            sel = sel_all[c0:c0 + 16384]
+            Fsel, _, _ = _positions(n_fin[sel][:, None], N)
+            mu_s, sg_s = _gauss_newton(xs[sel].astype(np.float64), m[sel], Fsel, mu[sel], sigma[sel], refine)
+            mu[sel], sigma[sel] = mu_s, sg_s
     res = RobustMean(mu=mu.astype(np.float32), sigma=sigma.astype(np.float32),
                      n_used=n_used.astype(np.int16), n_low=n_low.astype(np.int16),
                      n_high=n_high.astype(np.int16), valid=ok)
