@@ -54,6 +54,7 @@ def main() -> None:
         for name, cfg in (("pipeline (wls, local)", GroundTruthConfig()),
                           ("pipeline, wls on every pixel", GroundTruthConfig(uncensored_mean=False)),
                           ("global alignment", GroundTruthConfig(alignment="global")),
+                          ("pipeline, wls with known NLF", GroundTruthConfig(nlf=(args.beta1, args.beta1 / 100))),
                           ("censored MLE", GroundTruthConfig(method="mle")),
                           ("pipeline, plain mean", GroundTruthConfig(method="mean"))):
             t = time.perf_counter()
@@ -93,6 +94,8 @@ def main() -> None:
           f"/ global alignment = {p[0] / base['global alignment'][0]:.3f}; "
           f"/ wls on every pixel = {p[0] / base['pipeline, wls on every pixel'][0]:.3f}; "
           f"clipped pixels: WLS / oracle = {p[1] / base['oracle: unclipped, plain mean'][1]:.3f}, "
+          f"WLS with known NLF / oracle = "
+          f"{base['pipeline, wls with known NLF'][1] / base['oracle: unclipped, plain mean'][1]:.3f}, "
           f"MLE / oracle = {base['censored MLE'][1] / base['oracle: unclipped, plain mean'][1]:.3f}")
 
 

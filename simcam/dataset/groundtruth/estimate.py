@@ -39,6 +39,7 @@ class GroundTruthConfig:
     method: str = "wls"               #: robust mean: wls (seed), mle (censored MLE) or mean (plain)
     refine: int = 0                   #: Gauss-Newton steps on eq. 5.10 after the closed form (wls)
     uncensored_mean: bool = True      #: pixels without censored samples get the plain mean (efficient)
+    nlf: tuple[float, float] | None = None  #: known (beta1, beta2) for wls: sigma not fitted (extension)
     min_samples: int = 3              #: fewest uncensored samples for a fit; fewer -> fallback, invalid
     alignment: str = "local"          #: local (TPS from patch shifts), global (one shift), none
     patch: int = 512                  #: patch size, mosaic pixels (seed: 512); shrinks for small frames
@@ -341,6 +342,8 @@ def _run(burst, cfg, store, shape, cfa, lo, hi, dmap, dmask, timing, t0, progres
         kw["uncensored_mean"] = cfg.uncensored_mean
     if cfg.method == "wls":
         kw["refine"] = cfg.refine
+        if cfg.nlf is not None:
+            kw["nlf"] = tuple(float(v) for v in cfg.nlf)
     # censored samples are marked +-inf above, so the clip points themselves only matter for MLE
     flo, fhi = (lo, hi)
     tiles = list(range(0, H, rows))

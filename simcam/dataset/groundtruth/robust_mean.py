@@ -117,7 +117,7 @@ def _sorted_with_censoring(x: np.ndarray, lo: float, hi: float):
 
 
 def wls_cdf_fit(samples: np.ndarray, *, lo: float = 0.0, hi: float = 1.0, refine: int = 0,
-                min_samples: int = 3, axis: int = 0) -> RobustMean:
+                min_samples: int = 3, axis: int = 0, nlf: tuple[float, float] | None = None) -> RobustMean:
     """WLS fit of a normal CDF to the censored empirical CDF, per pixel (seed eq. 5.8-5.12).
 
     Parameters
@@ -134,6 +134,12 @@ def wls_cdf_fit(samples: np.ndarray, *, lo: float = 0.0, hi: float = 1.0, refine
         ~20x faster on large bursts (see ``experiments/fig5_9_robust_mean.py``).
     min_samples : int
         Fewest uncensored samples for a fit (>= 2); fewer -> fallback, ``valid`` False.
+    nlf : (beta1, beta2), optional
+        Known noise level function (seed eq. 5.2, e.g. the DNG NoiseProfile). Then
+        sigma = sqrt(beta1 mu + beta2) is not fitted: the regression keeps only its
+        intercept, mu = sum u (x - sigma z) / sum u, iterated twice with sigma
+        re-evaluated at the new mu (an extension beyond the seed; it recovers most of
+        the precision the two-parameter fit loses on heavily censored pixels).
 
     Returns
     -------
@@ -174,6 +180,14 @@ def wls_cdf_fit(samples: np.ndarray, *, lo: float = 0.0, hi: float = 1.0, refine
         sigma = np.where(ok, (S0 * Sxz - Sz * Sx) / np.where(ok, det, 1.0), 0.0)
         mu = np.where(ok, (Sx - sigma * Sz) / np.where(S0 > 0, S0, 1.0), 0.0)
     sigma = np.maximum(sigma, 0.0)
+    if nlf is not None:
+        b1, b2 = float(nlf[0]), float(nlf[1])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            for _ in range(2):
+                sigma = np.sqrt(np.maximum(b1 * np.clip(mu, 0, None) + b2, 1e-30))
+                mu = np.where(ok, (Sx - sigma * Sz) / np.where(S0 > 0, S0, 1.0), mu)
+        sigma = np.sqrt(np.maximum(b1 * np.clip(mu, 0, None) + b2, 1e-30))
+        refine = 0
     if refine > 0 and ok.any():
         sel_all = np.nonzero(ok & (sigma > 0))[0]
         for c0 in range(0, sel_all.size, 16384):  # bounded float64 temporaries
