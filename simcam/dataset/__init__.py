@@ -1,1 +1,1 @@
-"""Dataset tools: capture sets, photon transfer, the calibration loop."""
+"""Dataset tools: capture sets, photon transfer, the calibration loop, ground truth from bursts (seed 5.3)."""
