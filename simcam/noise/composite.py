@@ -28,7 +28,7 @@ from ..errors import NoiseModelError
 from .base import (NoiseCondition, NoiseModel, block_rng, check_clean, check_same_shape, frame_key, model_from_entry,
                    register_model, site_map)
 from .kernels import normal_f32
-from .effects.base import EffectContext, effect_from_entry
+from .effects.base import Effect, EffectContext, effect_from_entry
 
 #: block-stream id of the read noise sampled apart (effects use 1 + their index).
 READ_STREAM = 1_000_000
@@ -167,8 +167,10 @@ class Composite(NoiseModel):
         shape = clean.shape
         fixed = self.fixed_patterns(shape)
         keys = [frame_key(rng) for _ in range(n)]
+        # per-frame draws as in sample(); effects without any skip building a generator (same result)
+        per_frame = [type(e).frame is not Effect.frame for e in self.effects]
         draws = [[e.frame(shape, np.random.default_rng(np.random.SeedSequence([int(k) for k in key] + [1000 + i])))
-                  for i, e in enumerate(self.effects)] for key in keys]
+                  if per_frame[i] else {} for i, e in enumerate(self.effects)] for key in keys]
         signal = np.empty((n,) + shape, dtype=np.float32)
         sig_effects = [(i, e) for i, e in enumerate(self.effects) if e.stage == "signal"]
         for f in range(n):
