@@ -167,10 +167,9 @@ class Composite(NoiseModel):
         shape = clean.shape
         fixed = self.fixed_patterns(shape)
         keys = [frame_key(rng) for _ in range(n)]
-        # per-frame draws as in sample(); effects without any skip building a generator (same result)
+        # per-frame draws (row offsets, flicker gain, phase) straight from rng: no generator per frame
         per_frame = [type(e).frame is not Effect.frame for e in self.effects]
-        draws = [[e.frame(shape, np.random.default_rng(np.random.SeedSequence([int(k) for k in key] + [1000 + i])))
-                  if per_frame[i] else {} for i, e in enumerate(self.effects)] for key in keys]
+        draws = [[e.frame(shape, rng) if per_frame[i] else {} for i, e in enumerate(self.effects)] for _ in keys]
         signal = np.empty((n,) + shape, dtype=np.float32)
         sig_effects = [(i, e) for i, e in enumerate(self.effects) if e.stage == "signal"]
         for f in range(n):
@@ -185,14 +184,15 @@ class Composite(NoiseModel):
             read = normal_f32(rng, x.size).reshape(x.shape)
             read *= np.sqrt(site_map(read_var, shape, 0, name="read variance"))
             x += read
-        out_effects = [(i, e) for i, e in enumerate(self.effects) if e.stage == "readout"]
-        if out_effects:
+        for i, e in enumerate(self.effects):  # effect by effect (each frame sees them in list order)
+            if e.stage != "readout":
+                continue
+            if e.stack_ok:
+                x = e.apply(x, self._ctx(cond, None, i, fixed, None, signal, read))
+                continue
             for f in range(n):
-                xf = x[f]
-                rf = None if read is None else read[f]
-                for i, e in out_effects:
-                    xf = e.apply(xf, self._ctx(cond, keys[f], i, fixed, draws[f], signal[f], rf))
-                x[f] = xf
+                x[f] = e.apply(x[f], self._ctx(cond, keys[f], i, fixed, draws[f], signal[f],
+                                               None if read is None else read[f]))
         return x
 
     def sample_rows(self, clean_rows, cond, key, row0, *, out=None, threads=1):

@@ -75,6 +75,9 @@ class Effect(BaseModel):
     logprob_role: ClassVar[str | None] = None
     #: True for effects acting on the read noise alone (the composite then samples it apart).
     needs_read: ClassVar[bool] = False
+    #: True when ``apply`` is elementwise or broadcasts a fixed (H, W) map, needs no per-frame
+    #: draw, and so may be given a whole (n, H, W) stack at once (``Composite.sample_frames``).
+    stack_ok: ClassVar[bool] = False
 
     def to_entry(self) -> dict[str, Any]:
         return self.model_dump(mode="json")

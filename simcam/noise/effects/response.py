@@ -62,6 +62,7 @@ class Nonlinearity(Effect):
     strength: float = Field(ge=-0.45, le=0.45)
     stage = "readout"
     logprob_role = "response"
+    stack_ok = True
 
     def apply(self, x, ctx):
         x -= np.float32(self.strength) * x * x
@@ -91,6 +92,7 @@ class Quantization(Effect):
     """
 
     type: Literal["quantization"] = "quantization"
+    stack_ok = True
     range_dn: float = Field(gt=0)
     step_dn: float = Field(1.0, gt=0)
     offset_dn: float = 0.0
