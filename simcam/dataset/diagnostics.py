@@ -83,6 +83,14 @@ PRECEDENCE = {
     "lag2_corr": ("code_occupancy", "lag1_corr"),
 }
 
+#: The bootstrap null of the diagnostic on the left is not valid while one on the right is
+#: significant and outside the vocabulary (so absent from every simulation): temporal column
+#: noise leaves the even/odd-frame covariance of column profiles unbiased but inflates its spread,
+#: which the simulated captures then understate. Such a diagnostic is reported, not attributed.
+NULL_NEEDS = {
+    "col_fpn_excess": ("col_temporal_excess",),
+}
+
 
 @dataclass
 class CaptureData:

@@ -144,6 +144,35 @@ class NoiseModel(BaseModel):
                 block(r)
         return out
 
+    def sample_stack(self, clean: np.ndarray, cond: NoiseCondition, rng: np.random.Generator) -> np.ndarray:
+        """Noisy float32 frames for a stack of clean frames (n x H x W, H even) in one kernel pass.
+
+        For Monte-Carlo use (many small frames, e.g. the calibration loop's
+        bootstrap), where per-block seeding would dominate the cost: the stack
+        is sampled as one tall mosaic from ``rng`` directly. Same law as
+        :meth:`sample` frame by frame, deterministic given ``rng``, but not the
+        same bytes (no per-block frame keys, so no tiling invariance).
+        """
+        a = np.asarray(clean)
+        if a.ndim != 3 or a.shape[1] % 2:
+            raise NoiseModelError(f"{cond.source or 'clean'}: sample_stack expects n x H x W frames with H even, "
+                                  f"got shape {a.shape}")
+        n, h, w = a.shape
+        flat = check_clean(a.reshape(n * h, w), where=f"{cond.source or 'clean'}")
+        self.check_cond(cond, flat.shape)
+        out = np.empty(flat.shape, dtype=np.float32)
+        if flat.size:
+            self._sample_block(flat, cond, rng, 0, out)
+        return out.reshape(n, h, w)
+
+    def read_split(self) -> tuple["NoiseModel", SiteParam] | None:
+        """(the model without its signal-independent Gaussian read noise, that noise's variance), or None.
+
+        ``noisy = without.sample(clean) + N(0, variance)`` in law; used by composites whose effects act
+        on the read noise alone (``spatial_correlation``). None when the model has no such part.
+        """
+        return None
+
     def _sample_block(self, clean: np.ndarray, cond: NoiseCondition, rng: np.random.Generator,
                       row0: int, out: np.ndarray) -> None:
         """Fill ``out`` (float32, shape of ``clean``) with noisy values for these rows."""

@@ -148,6 +148,9 @@ class PoissonGaussian(NoiseModel):
         b1, b2 = self._maps(clean.shape, row0)
         pg_sample(clean, b1, b2, rng, out, where=f"{cond.source or 'clean'}: poisson_gaussian")
 
+    def read_split(self):
+        return self.model_copy(update={"beta2": 0.0}), self.beta2
+
     def variance(self, clean, cond):
         clean = check_clean(clean)
         b1, b2 = self._maps(clean.shape, 0, np.float64)
