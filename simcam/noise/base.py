@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, Union
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict, ValidationError, field_validator
 
 from ..cfa import check_pattern
 from ..errors import NoiseModelError, SimcamError
@@ -198,6 +198,32 @@ class NoiseModel(BaseModel):
             if isinstance(v, list) and len(v) == 4 and all(isinstance(x, (int, float)) for x in v):
                 return True
         return False
+
+
+class PoissonScaleModel(NoiseModel):
+    """Shared parameters of the Poisson-based models: ``beta1`` (normalised raw per
+    photo-electron, > 0) and ``beta2`` (Gaussian read variance, normalised raw^2, >= 0),
+    each one float or 4 per-CFA-site floats. Not registered itself."""
+
+    beta1: SiteParam
+    beta2: SiteParam
+
+    @field_validator("beta1")
+    @classmethod
+    def _check_beta1(cls, v):
+        validate_site_param(v, "beta1")
+        if (site_values(v, name="beta1") <= 0).any():
+            raise ValueError(f"beta1 must be > 0, got {v!r}")
+        return v
+
+    @field_validator("beta2")
+    @classmethod
+    def _check_beta2(cls, v):
+        return validate_site_param(v, "beta2")
+
+    def _maps(self, shape, row0, dtype=np.float32):
+        return (site_map(self.beta1, shape, row0, name="beta1", dtype=dtype),
+                site_map(self.beta2, shape, row0, name="beta2", dtype=dtype))
 
 
 # -- registry -------------------------------------------------------------
