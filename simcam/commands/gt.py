@@ -51,11 +51,6 @@ def gt(
     from ..errors import DatasetError
 
     npz, dng = _outputs(output)
-    if dng is not None:
-        try:
-            from ..io.dng_write import write_dng  # noqa: F401
-        except ImportError:
-            raise DatasetError(f"{dng}: DNG output needs simcam.io.dng_write, which this build lacks") from None
     kw = dict(black_level=black_level, white_level=white_level, nan_policy=nan_policy)
     burst = Burst.from_directory(burst_dir, pattern=pattern, **kw)
     inputs = {p.resolve() for p in map(Path, burst.names)}

@@ -494,7 +494,6 @@ def resolution(name: str, d: CaptureData) -> float:
         dm = d.dark_map()
         return 1.0 / (4 * dm[2]) if dm is not None else 0.0
     if name == "code_occupancy":  # one code of the span
-        v = code_occupancy(d)
         src = d.darks or d.flats
         span = float(np.percentile(src[0], 99) - np.percentile(src[0], 1)) + 1 if src else 1.0
         return 1.0 / max(span, 1.0)
