@@ -38,7 +38,6 @@ def main():
     ap.add_argument("--seeds", default="7")
     ap.add_argument("--scale", type=float, default=1.0, help="effect magnitude relative to DEFAULT_EFFECTS")
     ap.add_argument("--singles", action="store_true", help="only the 13 single-effect cases")
-    ap.add_argument("--backend", default="internal", help="loop simulator: internal or simcam")
     args = ap.parse_args()
     cases = [c for c in CASES if len(c) == 1] if args.singles else CASES
     seeds = [int(s) for s in args.seeds.split(",")]
@@ -50,7 +49,7 @@ def main():
                   f"{'KL final':>9s} {'floor':>9s} {'drop':>5s} ok  fitted (hidden) parameters")
         misses = []
         for case in cases:
-            r = run_case(case, seed=seed, scale=args.scale, backend=args.backend)
+            r = run_case(case, seed=seed, scale=args.scale)
             named = tuple(r.model.effects)
             un = ",".join(u["diagnostic"] for u in r.unexplained) or "-"
             ok = set(case) == set(named) and not r.unexplained
@@ -64,7 +63,7 @@ def main():
                                  for e in case if e in r.model.effects)
                 print(f"{'+'.join(case) or '(base only)':34s} {'+'.join(named) or '-':34s} {un:12s} {kb:9.2e} "
                       f"{kf:9.2e} {r.heldout_final['kl_floor']:9.2e} {drop:>5s} {'yes' if ok else 'NO ':3s} {pars}")
-        print(f"seed {seed}, scale {args.scale}, {args.backend}: {n_ok}/{len(cases)} cases named exactly ({time.perf_counter() - t0:.0f} s)"
+        print(f"seed {seed}, scale {args.scale}: {n_ok}/{len(cases)} cases named exactly ({time.perf_counter() - t0:.0f} s)"
               + ("" if not misses else "; misses: " + " | ".join(misses)))
 
 

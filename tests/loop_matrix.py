@@ -51,11 +51,11 @@ def scaled(effect: str, scale: float) -> dict:
     return p
 
 
-def run_case(effects: tuple, seed: int = 7, scale: float = 1.0, backend: str = "internal", **spec_kw):
+def run_case(effects: tuple, seed: int = 7, scale: float = 1.0, **spec_kw):
     from simcam.dataset.loop import LoopConfig, run_loop
 
     spec = SensorSpec(effects={e: scaled(e, scale) for e in effects}, **spec_kw)
-    return run_loop(in_memory_capture(capture_set(spec, seed=seed)), LoopConfig(backend=backend))[0]
+    return run_loop(in_memory_capture(capture_set(spec, seed=seed)), LoopConfig())[0]
 
 
 def matrix(cases=CASES):

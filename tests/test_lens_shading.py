@@ -147,3 +147,20 @@ def test_cropped_frame_without_geometry_raises():
     meta = synthetic_meta("RGGB", opcode_list2=radial_gain_maps(16, 16)).replace(origin=(2, 2))
     with pytest.raises(MetadataError, match="active_area"):
         LensShading()(RawFrame(np.ones((8, 8)), meta, kind="raw"))
+
+
+def test_sidd_mode_matches_opencv_style_resize_reference():
+    """mode: sidd = first GainMap, resized like cv2.INTER_LINEAR (skimage order-1 resize is
+    the independent reference: same half-pixel mapping, edge clamp), one gain per Bayer cell."""
+    skt = pytest.importorskip("skimage.transform")
+    from simcam.stages.lens_shading import LensShading
+
+    h, w = 40, 60
+    meta = synthetic_meta("RGGB", active_area=(0, 0, h, w), opcode_list2=radial_gain_maps(h, w, points=(5, 7)))
+    frame = RawFrame(np.full((h, w), 0.5, np.float32), meta, kind="raw")
+    out = LensShading(mode="sidd")(frame).data
+    grid = meta.gain_maps(2)[0].gains[:, :, 0].astype(np.float64)
+    ref = skt.resize(grid, (h // 2, w // 2), order=1, mode="edge", anti_aliasing=False)
+    for dy in (0, 1):
+        for dx in (0, 1):
+            np.testing.assert_allclose(out[dy::2, dx::2], 0.5 * ref, rtol=2e-6)

@@ -48,3 +48,29 @@ def test_profile_is_accepted_by_the_noise_stage():
     prof = profiles.profile_from_dict(doc, source="profile.yaml")
     model = prof.model_for(800)
     assert type(model).__name__.lower().startswith("composite")
+
+
+def test_noise_stage_from_the_profile_draws_the_fitted_noise():
+    """The written profile, read by simcam.profiles and sampled by the noise stage, has the loop model's
+    photon-transfer curvature and read-noise crosstalk (closed forms in DN, see test_loop_backend)."""
+    from simcam.noise import NoiseCondition
+    from simcam.profiles import profile_from_dict
+
+    c, a = -0.12, 0.35
+    m = LoopModel("RGGB", np.full((2, 2), 64.0), 1023.0, 2.0, 3.0, 9.0,
+                  effects={"nonlinearity": {"c": c}, "spatial_correlation": {"a": a}})
+    m.refit_read()
+    model = profile_from_dict(noise_profile([_Res(m)], _Cap()), source="profile.yaml").model_for(800)
+    s = 959.0
+    cond = NoiseCondition(cfa="RGGB")
+    x0 = 600.0  # linear level above black (DN)
+    fl = model.sample_frames(np.full((64, 64), x0 / s, np.float32), cond, np.random.default_rng(0), 16) * s
+    v = np.var(fl - fl.mean(0), axis=0, ddof=1).mean()
+    # delta method: (1 + 2 c x0 / s)^2 (K x0 + read^2); SE of 16 x 4096 variances ~ 1 % -> 5 %
+    assert v == pytest.approx((1 + 2 * c * x0 / s) ** 2 * (2.0 * x0 + 9.0), rel=0.05)
+    dk = model.sample_frames(np.zeros((64, 64), np.float32), cond, np.random.default_rng(1), 16) * s
+    r = dk - dk.mean(0)
+    p = r[:, 0::2, 0::2]
+    # in-plane lag-1 correlation of the read noise 2a / (1 + 2a^2), the response slope ~1 at black;
+    # SE ~ 1.5 / sqrt(16 * 1024) = 0.012 -> 0.05
+    assert np.mean(p[:, :, 1:] * p[:, :, :-1]) / np.mean(p * p) == pytest.approx(2 * a / (1 + 2 * a * a), abs=0.05)

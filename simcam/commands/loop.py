@@ -16,7 +16,6 @@ def loop(
     replicates: int = typer.Option(16, "--replicates", help="Bootstrap replicates per diagnostic evaluation (>= 4)."),
     alpha: float = typer.Option(0.01, "--alpha", help="Family-wise significance level (Holm)."),
     max_size: int = typer.Option(128, "--max-size", help="Centre crop (pixels per side) the loop works on."),
-    simulator: str = typer.Option("internal", "--simulator", help="Bootstrap simulator: 'internal' (the loop's reference model) or 'simcam' (the noise stage's composite models)."),
 ) -> None:
     """Fit a noise model to measured frames, find and attribute its residuals, refit, report before/after."""
     from ..dataset.loop import LoopConfig
@@ -29,9 +28,7 @@ def loop(
         raise DatasetError(f"--alpha {alpha}: expected a level in (0, 1)")
     if max_size < 16:
         raise DatasetError(f"--max-size {max_size}: expected >= 16 pixels")
-    if simulator not in ("internal", "simcam"):
-        raise DatasetError(f"--simulator {simulator!r}: expected 'internal' or 'simcam'")
-    cfg = LoopConfig(replicates=replicates, alpha=alpha, seed=seed, max_size=max_size, backend=simulator)
+    cfg = LoopConfig(replicates=replicates, alpha=alpha, seed=seed, max_size=max_size)
     doc = run_and_write(capture_dir, out, start_profile=start_profile, cfg=cfg)
     for g in doc["isos"]:
         un = ", ".join(u["diagnostic"] for u in g["unexplained"]) or "none"

@@ -204,7 +204,7 @@ def fit_nonlinearity(d, model, ctx):
 
 # ------------------------------------------------------------------ indirect fits
 
-def indirect_fit(d, model, effect, make_params, grid, stat_name, specs, rng_seed, reps=3, backend="internal"):
+def indirect_fit(d, model, effect, make_params, grid, stat_name, specs, rng_seed, reps=3):
     """Parameter on ``grid`` whose simulated ``stat_name`` (mean of ``reps`` sensors) matches the data."""
     target = dg.STATISTICS[stat_name](d)
     means = []
@@ -213,7 +213,7 @@ def indirect_fit(d, model, effect, make_params, grid, stat_name, specs, rng_seed
         vals = []
         for r in range(reps):
             rng = np.random.default_rng([rng_seed, j, r])
-            sims = simulate_capture(m, specs, rng, backend)
+            sims = simulate_capture(m, specs, rng)
             vals.append(dg.STATISTICS[stat_name](ctx_like(d, sims, specs)))
         means.append(np.mean(vals))
     means = np.asarray(means)
@@ -238,15 +238,13 @@ def ctx_like(d: dg.CaptureData, sims: list, specs: list[SimSpec]) -> dg.CaptureD
 
 def fit_heavy_tail(d, model, ctx):
     lam = indirect_fit(d, model, "heavy_tail_read", lambda g: {"lam": float(g)},
-                       [-0.45, -0.3, -0.2, -0.1, 0.0, 0.14], "dark_ppcc_lambda", ctx["dark_specs"], ctx["seed"],
-                       backend=ctx.get("backend", "internal"))
+                       [-0.45, -0.3, -0.2, -0.1, 0.0, 0.14], "dark_ppcc_lambda", ctx["dark_specs"], ctx["seed"])
     return {"lam": float(np.clip(lam, -0.45, 0.14))}
 
 
 def fit_spatial_correlation(d, model, ctx):
     a = indirect_fit(d, model, "spatial_correlation", lambda g: {"a": float(g)},
-                     [0.0, 0.1, 0.2, 0.3, 0.4, 0.5], "lag1_corr", ctx["dark_specs"], ctx["seed"],
-                     backend=ctx.get("backend", "internal"))
+                     [0.0, 0.1, 0.2, 0.3, 0.4, 0.5], "lag1_corr", ctx["dark_specs"], ctx["seed"])
     return {"a": float(np.clip(a, 0.0, 0.5))}
 
 

@@ -52,7 +52,6 @@ class LoopConfig:
     max_iterations: int = 10
     seed: int = 0
     max_size: int = 128  # centre crop (pixels per side) used by the loop
-    backend: str = "internal"  # simulator: "internal" or "simcam" (simcam.noise composite)
     kl_tolerance: float = 0.10  # relative growth of held-out KL still accepted (plus twice its sampling floor)
 
 
@@ -219,7 +218,7 @@ class Loop:
         specs = self.g.specs(model, self.g.fit)
         sim_stats = []
         for r in range(self.cfg.replicates):
-            sims = simulate_capture(model, specs, self._rng(1, tag, r), self.cfg.backend)
+            sims = simulate_capture(model, specs, self._rng(1, tag, r))
             sim_stats.append(dg.compute_all(_capture(self.g, self.g.fit, sims, specs), self.applicable))
         discs = []
         for name in self.applicable:
@@ -232,7 +231,7 @@ class Loop:
         real = noise_values(self.g.held, [f for _, f, _ in self.g.held], specs, model)
         sim_noise, sim_stats = [], []
         for r in range(self.cfg.heldout_replicates):
-            sims = simulate_capture(model, specs, self._rng(2, tag, r), self.cfg.backend)
+            sims = simulate_capture(model, specs, self._rng(2, tag, r))
             sim_noise.append(noise_values(self.g.held, sims, specs, model))
             if diagnostics:
                 sim_stats.append(dg.compute_all(_capture(self.g, self.g.held, sims, specs), diagnostics))
@@ -257,6 +256,7 @@ class Loop:
         res.base_disc = discs
         excluded: set[str] = set()  # unexplained for good
         rejected: set[str] = set()  # effect did not help; retried once the model changes
+        unmodelled: set[str] = set()  # significant, and no effect of the vocabulary explains them
         held_before = self.heldout(model, tag, tuple(self.applicable))
         res.heldout_base = {"kl": held_before["kl"], "nll": held_before["nll"], "kl_floor": held_before["kl_floor"]}
         res.plots["hist_base"] = (held_before["real_noise"], held_before["model_noise"])
@@ -271,7 +271,16 @@ class Loop:
                     chosen = next(d for d in sig if d.name == pre)
                     break
             effect = dg.DIAGNOSTIC_EFFECT[chosen.name]
+            outside = [b for b in dg.NULL_NEEDS.get(chosen.name, ()) if b in unmodelled]
+            if outside:
+                excluded.add(chosen.name)
+                res.unexplained.append({"diagnostic": chosen.name, "discrepancy": chosen.z,
+                                        "reason": f"not attributed: {outside[0]} (significant, no effect of the "
+                                                  "vocabulary) inflates its spread beyond the simulated one"})
+                continue
             if effect is None or effect in model.effects:
+                if effect is None:
+                    unmodelled.add(chosen.name)
                 excluded.add(chosen.name)
                 why = "no effect of the vocabulary explains it" if effect is None else \
                     f"{effect} is already in the model and does not explain it"
@@ -279,7 +288,6 @@ class Loop:
                 continue
             tag += 1
             ctx = {"value": chosen.value, "sim_mean": chosen.sim_mean, "seed": cfg.seed * 1000 + tag,
-                   "backend": cfg.backend,
                    "dark_specs": [sp for sp in self.g.specs(model, self.g.fit) if sp.kind == "dark"]}
             if effect in ("heavy_tail_read", "spatial_correlation") and not ctx["dark_specs"]:
                 excluded.add(chosen.name)
@@ -353,6 +361,5 @@ def run_loop(capture: CaptureSet, cfg: LoopConfig | None = None,
         res = Loop(group, cfg, iso).run(start)
         res.notes = [n for n in capture.notes if n.startswith(f"ISO {iso}:") or not n.startswith("ISO ")] + notes
         res.plots["group"] = group
-        res.plots["backend"] = cfg.backend
         out.append(res)
     return out

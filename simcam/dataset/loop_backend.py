@@ -1,29 +1,33 @@
-"""Simulating the loop's model with simcam's own noise stage (``simcam.noise`` composite models).
+"""The loop's parametric bootstrap drawn by simcam's noise stage (``simcam.noise`` composite models).
 
-:func:`simulate_simcam` draws the same sequences as :func:`simcam.dataset.loop_model.simulate`
-through :func:`simcam.dataset.loop_profile.noise_entry` (the profile entry the loop writes)
-and ``Composite.sample`` on normalised raw, then maps back to DN: per-site black differences
-become a ``black_level_offset``, the ADC is the noise stage's ``quantization`` effect (step 1 DN
-when the model has none) on the mean black level, and values are clipped to [0, white].
+A thin adapter, no noise physics of its own: the fitted :class:`LoopModel` becomes the
+composite entry of :func:`simcam.dataset.loop_profile.noise_entry` (the one written to
+``profile.yaml``) plus what the capture's ADC adds to the noise stage's normalised raw:
 
-Semantics differ from the loop's reference simulator for two effects (see ``loop_profile``):
-``nonlinearity`` acts on the expected signal only (no photon-transfer curvature), and
-``spatial_correlation`` couples all noise (shot noise included) and inflates its variance by
-1 + 4c^2 (compensated in beta2 for the read noise).
+* per-site black-level differences, as a ``black_level_offset`` (before quantisation);
+* a 1-DN ``quantization`` on the mean black level when the model has none;
+* DN = normalised * (white - black) + black, clipped to [0, white].
+
+The expected signal a sequence is simulated from is the measured one taken back through the
+response (:func:`simcam.dataset.loop_model.linear_signal`). Frames of a sequence come from
+``Composite.sample_frames`` (fixed patterns drawn once per simulated sensor, base noise of all
+frames in one kernel pass); each call of :func:`simulate_capture` is a new sensor (sensor seed
+drawn from ``rng``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .loop_model import LoopModel, SimSpec
+from .loop_model import LoopModel, SimSpec, linear_signal
 from .loop_profile import noise_entry
 
+#: effects whose draw is a fixed pattern (left out when the clean reference already holds it).
+FIXED_EFFECTS = ("dsnu", "column_fpn", "prnu", "hot_pixels")
 
-def composite_for(model: LoopModel, sensor_seed: int):
-    """The noise-stage composite model equivalent to ``model`` (normalised raw)."""
-    from ..noise.base import model_from_entry
 
+def composite_entry(model: LoopModel) -> dict:
+    """The profile's composite entry for ``model`` with the capture's ADC (module docstring)."""
     entry, _notes = noise_entry(model)
     if entry["type"] != "composite":
         entry = {"type": "composite", "base": entry, "effects": []}
@@ -36,33 +40,36 @@ def composite_for(model: LoopModel, sensor_seed: int):
         if found:
             found[0]["offset"] = [float(a + b) for a, b in zip(found[0]["offset"], site)]
         else:
-            effects.append({"type": "black_level_offset", "offset": [float(x) for x in site]})
+            at = next((i for i, e in enumerate(effects) if e["type"] == "quantization"), len(effects))
+            effects.insert(at, {"type": "black_level_offset", "offset": [float(x) for x in site]})
     if not any(e["type"] == "quantization" for e in effects):
         effects.append({"type": "quantization", "range_dn": float(fs), "step_dn": 1.0, "offset_dn": float(black.mean())})
-    c = next((e["coefficient"] for e in effects if e["type"] == "spatial_correlation"), 0.0)
-    base = dict(entry["base"])
-    base["beta2"] = float(base["beta2"]) / (1 + 4 * c * c)
-    for e in effects:
-        if e["type"] == "heavy_tail_read":
-            e["scale"] = float(e["scale"]) / np.sqrt(1 + 4 * c * c)
-    return model_from_entry({"type": "composite", "base": base, "effects": effects, "sensor_seed": int(sensor_seed)},
-                            where="loop model")
+    return {"type": "composite", "base": entry["base"], "effects": effects}
 
 
-def simulate_simcam(model: LoopModel, spec: SimSpec, rng, sensor: dict) -> np.ndarray:
-    """(n, H, W) float32 DN frames of one sequence drawn by simcam's noise stage."""
-    from ..noise.base import NoiseCondition
+def simulate_capture(model: LoopModel, specs: list[SimSpec], rng) -> list[np.ndarray]:
+    """One simulated sensor, all sequences of ``specs``: (n, H, W) float32 DN frames each."""
+    from ..noise.base import NoiseCondition, model_from_entry
 
-    fs = model.full_scale_dn
-    comp = sensor.setdefault("composite", composite_for(model, sensor["seed"]))
-    if spec.fixed_in_clean:  # scene whose clean already holds the fixed pattern: drop fixed-pattern effects
-        keep = [e for e in comp.effects if e.type not in ("dsnu", "column_fpn", "prnu", "hot_pixels")]
-        comp = comp.model_copy(update={"effects": keep})
-    clean = (np.maximum(spec.signal_dn, 0.0) / fs).astype(np.float32)
+    entry = composite_entry(model)
+    entry["sensor_seed"] = int(rng.integers(0, 2**31))
+    comp = model_from_entry(entry, where="loop model")
+    bare = None
     cond = NoiseCondition(cfa=model.cfa or "RGGB", source="loop simulation")
+    fs = model.full_scale_dn
     black = float(np.mean(model.black_dn))
-    out = np.empty((spec.n,) + clean.shape, dtype=np.float32)
-    for i in range(spec.n):
-        x = comp.sample(clean, cond, rng).astype(np.float64)
-        out[i] = np.clip(np.round(x * fs + black, 6), 0, model.white_dn)
+    q = model.q
+    out = []
+    for sp in specs:
+        m = comp
+        if sp.fixed_in_clean:  # a scene whose clean reference (temporal mean) already holds the fixed patterns
+            if bare is None:
+                bare = comp.model_copy(update={"effects": [e for e in comp.effects if e.type not in FIXED_EFFECTS]})
+            m = bare
+        clean = (linear_signal(model, sp.signal_dn) / fs).astype(np.float32)
+        x = m.sample_frames(clean, cond, rng, sp.n).astype(np.float64)
+        x *= fs
+        x += black
+        # the composite ends with its quantization: snap the float32 round trip back onto the ADC codes
+        out.append(np.clip(np.round(x / q) * q, 0, model.white_dn).astype(np.float32))
     return out

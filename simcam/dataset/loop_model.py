@@ -1,19 +1,20 @@
-"""The sensor model the calibration loop fits, and its simulator (parametric bootstrap).
+"""The sensor model the calibration loop fits (parameters in DN) and its closed-form marginal.
 
-A Poisson-Gaussian base (seed eq. 3.6; EMVA 1288 sec. 2) in DN plus any of the
-effects of simcam's noise vocabulary, all in physical units::
+The model is simcam's noise-stage composite (:mod:`simcam.noise`) written in
+the units the loop measures (DN, electrons): a Poisson-Gaussian base (seed
+eq. 3.6; EMVA 1288 sec. 2) plus effects of the noise vocabulary. In signal-
+chain order::
 
     e     ~ Poisson(mu_e * prnu_map * (1 + flicker_f))
-    x     = K * g_c * e + read + row_f,r + periodic_f          (DN, linear)
-    y     = x + c * x**2 / (white - black)                     (nonlinearity)
+    x     = K * g_c * e + read (crosstalk-filtered with shot noise) + row_f,r + periodic_f   (DN)
+    y     = x + c * x**2 / (white - black)                     (nonlinearity on the noisy value)
     v     = black + offset_c + dsnu_map + col_map + hot_map + y
     frame = clip(round(v / q) * q, 0, white)                   (ADC, step q DN)
 
-``simulate(model, spec, rng, sensor)`` is the small internal interface the
-loop depends on; fixed patterns (DSNU, column FPN, PRNU, hot pixels) are drawn
-once per simulated *sensor* (:func:`draw_sensor`) and shared by all its
-sequences. (Independent of ``simcam.noise``, which was not available when
-this was written; the profile written by the loop uses the same effect names.)
+There is no second simulator: :func:`simulate_capture` converts the model to
+the noise stage's composite entry (:func:`simcam.dataset.loop_profile.noise_entry`,
+the entry written to ``profile.yaml``) and samples it
+(:mod:`simcam.dataset.loop_backend`), so the profile reproduces the bootstrap.
 """
 
 from __future__ import annotations
@@ -24,11 +25,6 @@ from math import gamma
 
 import numpy as np
 
-EFFECTS = (
-    "row_noise", "column_fpn", "dsnu", "prnu", "hot_pixels", "heavy_tail_read", "quantization",
-    "spatial_correlation", "periodic_pattern", "black_level_offset", "frame_flicker",
-    "nonlinearity", "channel_gain",
-)
 PLANE_OFFSETS = ((0, 0), (0, 1), (1, 0), (1, 1))
 
 
@@ -126,106 +122,25 @@ def tukey_var(lam: float) -> float:
     return 2.0 / lam ** 2 * (1.0 / (1 + 2 * lam) - gamma(lam + 1) ** 2 / gamma(2 * lam + 2))
 
 
-def tukey_sample(lam: float, size, rng) -> np.ndarray:
-    """Tukey-lambda variates by the quantile function Q(u) = (u^lam - (1-u)^lam) / lam."""
-    u = np.clip(rng.random(size), 1e-12, 1 - 1e-12)
-    if abs(lam) < 1e-9:
-        return np.log(u / (1 - u))
-    return (u ** lam - (1 - u) ** lam) / lam
-
-
-def draw_sensor(model: LoopModel, shape: tuple[int, int], rng) -> dict:
-    """Fixed patterns of one simulated sensor: additive offset map (DN) and PRNU map."""
-    e = model.effects
-    h, w = shape
-    offset = site_map(e.get("black_level_offset", {}).get("offset_dn", [0.0] * 4), shape)
-    if "dsnu" in e:
-        offset = offset + rng.normal(0, e["dsnu"]["sigma_dn"], shape)
-    if "column_fpn" in e:
-        offset = offset + rng.normal(0, e["column_fpn"]["sigma_dn"], (1, w))
-    if "hot_pixels" in e:
-        p = e["hot_pixels"]
-        hot = rng.random(shape) < p["fraction"]
-        offset = offset + hot * rng.lognormal(p["log_mean"], p["log_sigma"], shape)
-    prnu = 1.0 + rng.normal(0, e["prnu"]["sigma"], shape) if "prnu" in e else None
-    return {"offset": offset, "prnu": prnu}
-
-
-def _nonlin(x, c, s):
-    return x + c * x * x / s
-
-
-def _nonlin_inv(y, c, s):
-    if abs(c) < 1e-12:
+def linear_signal(model: LoopModel, signal_dn: np.ndarray) -> np.ndarray:
+    """Expected signal before the response (DN above black) whose response is ``signal_dn`` (as measured),
+    i.e. the inverse of the noise stage's ``nonlinearity`` (``strength = -c``) in DN."""
+    y = np.maximum(np.asarray(signal_dn, dtype=np.float64), 0.0)
+    c = model.effects.get("nonlinearity", {}).get("c", 0.0)
+    if not c:
         return y
-    disc = np.maximum(1 + 4 * c * y / s, 0.0)
-    return (np.sqrt(disc) - 1) * s / (2 * c)
+    from ..noise.effects.response import Nonlinearity
 
-
-def _plane_filter(noise: np.ndarray, a: float) -> np.ndarray:
-    out = noise
-    for axis in (-2, -1):
-        out = out + a * (np.roll(out, 2, axis=axis) + np.roll(out, -2, axis=axis))
-    return out / (1 + 2 * a * a)
-
-
-def simulate(model: LoopModel, spec: SimSpec, rng, sensor: dict) -> np.ndarray:
-    """(n, H, W) float32 frames in DN drawn from ``model`` for one sequence."""
-    e = model.effects
-    shape = spec.signal_dn.shape
-    n = spec.n
     s = model.full_scale_dn
-    c = e.get("nonlinearity", {}).get("c", 0.0)
-    lin = _nonlin_inv(np.maximum(spec.signal_dn, 0.0), c, s)
-    kg = model.K * site_map(model.gains(), shape)
-    mu_e = lin / kg
-    if sensor["prnu"] is not None and not spec.fixed_in_clean:
-        mu_e = mu_e * sensor["prnu"]
-    lam = np.broadcast_to(mu_e, (n,) + shape)
-    if "frame_flicker" in e:
-        lam = lam * (1 + rng.normal(0, e["frame_flicker"]["sigma"], (n, 1, 1)))
-    x = kg * rng.poisson(np.maximum(lam, 0)).astype(np.float64) if np.any(mu_e > 0) else np.zeros((n,) + shape)
-    if "heavy_tail_read" in e:
-        t = e["heavy_tail_read"]["lam"]
-        read = tukey_sample(t, (n,) + shape, rng) / np.sqrt(tukey_var(t))
-    else:
-        read = rng.standard_normal((n,) + shape)
-    if "spatial_correlation" in e:
-        read = _plane_filter(read, e["spatial_correlation"]["a"])
-    x += model.read_dn * read
-    if "row_noise" in e:
-        x += rng.normal(0, e["row_noise"]["sigma_dn"], (n, shape[0], 1))
-    if "periodic_pattern" in e:
-        p = e["periodic_pattern"]
-        phase = rng.uniform(0, 2 * np.pi, (n, 1, 1))
-        if p.get("axis", "row") == "row":
-            idx = np.arange(shape[0])[None, :, None]
-        else:
-            idx = np.arange(shape[1])[None, None, :]
-        x += p["amplitude_dn"] * np.sin(2 * np.pi * idx / p["period_px"] + phase)
-    if c:
-        x = _nonlin(x, c, s)
-    v = site_map(model.black_dn.ravel(), shape) + x
-    if not spec.fixed_in_clean:
-        v += sensor["offset"]
-    q = model.q
-    return np.clip(np.round(v / q) * q, 0, model.white_dn).astype(np.float32)
+    return Nonlinearity(strength=float(np.clip(-c, -0.45, 0.45))).inverse(y / s) * s
 
 
-#: Which simulator the loop uses: "internal" (this module) or "simcam" (simcam.noise composite,
-#: :mod:`simcam.dataset.loop_backend`).
-BACKENDS = ("internal", "simcam")
+def simulate_capture(model: LoopModel, specs: list[SimSpec], rng) -> list[np.ndarray]:
+    """One simulated sensor (new fixed patterns), all sequences of ``specs``: (n, H, W) float32 DN each,
+    drawn by simcam's noise stage (:func:`simcam.dataset.loop_backend.simulate_capture`)."""
+    from .loop_backend import simulate_capture as _sim
 
-
-def simulate_capture(model: LoopModel, specs: list[SimSpec], rng, backend: str = "internal") -> list[np.ndarray]:
-    """One simulated sensor, all sequences of ``specs`` (same geometry)."""
-    if backend == "simcam":
-        from .loop_backend import simulate_simcam
-
-        sensor = {"seed": int(rng.integers(0, 2**31))}
-        return [simulate_simcam(model, sp, rng, sensor) for sp in specs]
-    sensor = draw_sensor(model, specs[0].signal_dn.shape, rng)
-    return [simulate(model, sp, rng, sensor) for sp in specs]
+    return _sim(model, specs, rng)
 
 
 def marginal_variance(model: LoopModel, signal_dn: np.ndarray, *, fixed_in_clean: bool = False) -> np.ndarray | None:
@@ -237,7 +152,7 @@ def marginal_variance(model: LoopModel, signal_dn: np.ndarray, *, fixed_in_clean
     shape = signal_dn.shape
     s = model.full_scale_dn
     c = e.get("nonlinearity", {}).get("c", 0.0)
-    lin = _nonlin_inv(np.maximum(signal_dn, 0.0), c, s)
+    lin = linear_signal(model, signal_dn)
     kg = model.K * site_map(model.gains(), shape)
     v = kg * lin + model.read_dn ** 2
     v = v + e.get("row_noise", {}).get("sigma_dn", 0.0) ** 2
@@ -245,10 +160,10 @@ def marginal_variance(model: LoopModel, signal_dn: np.ndarray, *, fixed_in_clean
         v = v + e["periodic_pattern"]["amplitude_dn"] ** 2 / 2
     if "frame_flicker" in e:
         v = v + (e["frame_flicker"]["sigma"] * lin) ** 2
-    if not fixed_in_clean:
-        if "prnu" in e:
-            v = v + (e["prnu"]["sigma"] * lin) ** 2
-        v = v + e.get("dsnu", {}).get("sigma_dn", 0.0) ** 2 + e.get("column_fpn", {}).get("sigma_dn", 0.0) ** 2
-    if c:
+    if not fixed_in_clean and "prnu" in e:
+        v = v + (e["prnu"]["sigma"] * lin) ** 2
+    if c:  # the response acts on the noisy value: variance times its squared slope (delta method)
         v = v * (1 + 2 * c * lin / s) ** 2
+    if not fixed_in_clean:  # offsets come after the response
+        v = v + e.get("dsnu", {}).get("sigma_dn", 0.0) ** 2 + e.get("column_fpn", {}).get("sigma_dn", 0.0) ** 2
     return v + model.q ** 2 / 12.0

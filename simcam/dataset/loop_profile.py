@@ -2,21 +2,19 @@
 
 Each ISO becomes a ``composite`` entry: a ``poisson_gaussian`` base on normalised raw
 (beta1 = K / (white - black), beta2 = read^2 / (white - black)^2, seed eq. 3.6) and the effects
-in the noise stage's parameterisation (normalised raw offsets, dimensionless gains). Order: signal
-effects (prnu, channel_gain, frame_flicker, nonlinearity), then readout effects with crosstalk
-first and quantisation last.
+in the noise stage's parameterisation (normalised raw offsets, dimensionless gains), in signal-chain
+order: signal effects (prnu, frame_flicker), then readout effects: heavy-tailed read noise,
+crosstalk (on shot + read noise), row and periodic noise, the response (nonlinearity, on the noisy
+value), fixed offsets, quantisation last.
 
-Conversions that are approximations (stated in the profile's provenance notes):
+The same entry is what the loop's bootstrap samples (:mod:`simcam.dataset.loop_backend`), so the
+noise stage given ``profile.yaml`` draws the noise the loop fitted. Conversions:
 
-* ``heavy_tail_read``: the loop's read noise *is* Tukey-lambda with the read variance; the noise
-  stage adds ``scale * TukeyLambda(lam)`` to the base, so beta2 is set to 0 and
+* ``heavy_tail_read``: the read noise *is* Tukey-lambda with the read variance: beta2 = 0 and
   ``scale = read / sqrt(var(TukeyLambda(lam)))``.
-* ``spatial_correlation``: the loop filters read noise with a separable [a, 1, a] kernel inside
-  each CFA plane; the noise stage's 4-neighbour coupling ``c`` is chosen with the same
-  nearest same-colour correlation (2a / (1 + 2a^2) = 2c / (1 + 4c^2)).
-* ``hot_pixels``: log-normal offsets become one offset, their mean.
-* ``nonlinearity``: ``strength = -c`` (compressive only); the noise stage applies it to the
-  expected signal, the loop to signal plus noise.
+* ``spatial_correlation``: the loop's ``a`` is the noise stage's ``coefficient`` (same kernel).
+* ``nonlinearity``: ``strength = -c`` (``y = x + c x^2 / (white - black)`` in DN).
+* ``hot_pixels``: the loop's log-normal fit becomes the noise stage's single offset, its mean.
 * ``channel_gain``: the loop's per-site gain acts after photon counting (it changes the
   variance-to-mean ratio), so it is written as per-site ``beta1`` of the base, not as the noise
   stage's ``channel_gain`` effect (which scales the expected signal, i.e. a QE difference).
@@ -30,16 +28,9 @@ import numpy as np
 
 from .loop_model import LoopModel, tukey_var
 
-SIGNAL_ORDER = ("prnu", "channel_gain", "frame_flicker", "nonlinearity")
-READOUT_ORDER = ("spatial_correlation", "heavy_tail_read", "row_noise", "periodic_pattern", "column_fpn", "dsnu",
-                 "hot_pixels", "black_level_offset", "quantization")
-
-
-def _coupling(a: float) -> float:
-    rho = 2 * a / (1 + 2 * a * a)
-    if rho <= 1e-12:
-        return 0.0
-    return float(min((1 - np.sqrt(max(1 - 4 * rho * rho, 0.0))) / (4 * rho), 0.25))
+SIGNAL_ORDER = ("prnu", "channel_gain", "frame_flicker")
+READOUT_ORDER = ("heavy_tail_read", "spatial_correlation", "row_noise", "periodic_pattern", "nonlinearity",
+                 "column_fpn", "dsnu", "hot_pixels", "black_level_offset", "quantization")
 
 
 def noise_entry(model: LoopModel) -> tuple[dict, list[str]]:
@@ -60,20 +51,14 @@ def noise_entry(model: LoopModel) -> tuple[dict, list[str]]:
             beta1 = [float(model.K * g / fs) for g in p["gains"]]
         elif name == "frame_flicker":
             effects.append({"type": "frame_flicker", "sigma": float(p["sigma"])})
-        elif name == "nonlinearity":
-            if p["c"] < 0:
-                effects.append({"type": "nonlinearity", "strength": float(min(-p["c"], 0.45))})
-                notes.append("nonlinearity: applied to the expected signal by the noise stage (the loop applies "
-                             "it to signal plus noise)")
-            else:
-                notes.append(f"nonlinearity: expansive response c = {p['c']:.3g} has no noise-stage equivalent; left out")
     for name in READOUT_ORDER:
         if name not in e:
             continue
         p = e[name]
         if name == "spatial_correlation":
-            effects.append({"type": "spatial_correlation", "coefficient": _coupling(p["a"])})
-            notes.append("spatial_correlation: same nearest same-colour correlation as the loop's [a, 1, a] filter")
+            effects.append({"type": "spatial_correlation", "coefficient": float(p["a"])})
+        elif name == "nonlinearity":
+            effects.append({"type": "nonlinearity", "strength": float(np.clip(-p["c"], -0.45, 0.45))})
         elif name == "heavy_tail_read":
             scale = model.read_dn / np.sqrt(tukey_var(p["lam"])) / fs
             effects.append({"type": "heavy_tail_read", "lam": float(p["lam"]), "scale": float(scale)})
@@ -163,10 +148,7 @@ def models_from_noise_profile(doc: dict, where: str) -> dict[int, LoopModel]:
             elif t == "nonlinearity":
                 effects[t] = {"c": -float(eff["strength"])}
             elif t == "spatial_correlation":
-                c = float(eff["coefficient"])
-                rho = 2 * c / (1 + 4 * c * c)
-                a = (1 - np.sqrt(max(1 - 2 * rho * rho, 0.0))) / (2 * rho) if rho > 1e-12 else 0.0
-                effects[t] = {"a": float(a)}
+                effects[t] = {"a": float(eff["coefficient"])}
             elif t == "heavy_tail_read":
                 effects[t] = {"lam": float(eff["lam"])}
                 read = float(np.sqrt(read ** 2 + (eff["scale"] * fs) ** 2 * tukey_var(eff["lam"])))

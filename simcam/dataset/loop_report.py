@@ -85,7 +85,7 @@ def build_report(results: list[GroupResult], capture, cfg: LoopConfig, emva: dic
                      "alpha": cfg.alpha, "correction": "Holm step-down over the applicable diagnostics",
                      "test": "two-sided Student t (R-1 dof) on the standardised discrepancy",
                      "max_size": cfg.max_size, "seed": cfg.seed, "max_iterations": cfg.max_iterations,
-                     "simulator": cfg.backend},
+                     "simulator": "simcam.noise composite (the profile.yaml entry), Composite.sample_frames"},
         "kl_binning": KL_BINNING,
         "nll_density": "per-pixel Gaussian marginal of the model about the plane mean (null when the model has "
                        "heavy-tailed read noise or hot pixels)",
@@ -231,7 +231,7 @@ def figures(r: GroupResult, seed: int = 0) -> dict[str, str]:
         specs = g.specs(model, g.fit)
         acc = {2: [], 1: []}
         for rep in range(4):
-            sims = simulate_capture(model, specs, np.random.default_rng([seed, 99, rep]), r.plots.get("backend", "internal"))
+            sims = simulate_capture(model, specs, np.random.default_rng([seed, 99, rep]))
             cd = ctx_like(d, sims, specs)
             for axis in (2, 1):
                 acc[axis].append(dg.periodogram(cd, axis))

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, Union
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict, ValidationError, field_validator
 
 from ..cfa import check_pattern
 from ..errors import NoiseModelError, SimcamError
@@ -144,6 +144,35 @@ class NoiseModel(BaseModel):
                 block(r)
         return out
 
+    def sample_stack(self, clean: np.ndarray, cond: NoiseCondition, rng: np.random.Generator) -> np.ndarray:
+        """Noisy float32 frames for a stack of clean frames (n x H x W, H even) in one kernel pass.
+
+        For Monte-Carlo use (many small frames, e.g. the calibration loop's
+        bootstrap), where per-block seeding would dominate the cost: the stack
+        is sampled as one tall mosaic from ``rng`` directly. Same law as
+        :meth:`sample` frame by frame, deterministic given ``rng``, but not the
+        same bytes (no per-block frame keys, so no tiling invariance).
+        """
+        a = np.asarray(clean)
+        if a.ndim != 3 or a.shape[1] % 2:
+            raise NoiseModelError(f"{cond.source or 'clean'}: sample_stack expects n x H x W frames with H even, "
+                                  f"got shape {a.shape}")
+        n, h, w = a.shape
+        flat = check_clean(a.reshape(n * h, w), where=f"{cond.source or 'clean'}")
+        self.check_cond(cond, flat.shape)
+        out = np.empty(flat.shape, dtype=np.float32)
+        if flat.size:
+            self._sample_block(flat, cond, rng, 0, out)
+        return out.reshape(n, h, w)
+
+    def read_split(self) -> tuple["NoiseModel", SiteParam] | None:
+        """(the model without its signal-independent Gaussian read noise, that noise's variance), or None.
+
+        ``noisy = without.sample(clean) + N(0, variance)`` in law; used by composites whose effects act
+        on the read noise alone (``spatial_correlation``). None when the model has no such part.
+        """
+        return None
+
     def _sample_block(self, clean: np.ndarray, cond: NoiseCondition, rng: np.random.Generator,
                       row0: int, out: np.ndarray) -> None:
         """Fill ``out`` (float32, shape of ``clean``) with noisy values for these rows."""
@@ -169,6 +198,32 @@ class NoiseModel(BaseModel):
             if isinstance(v, list) and len(v) == 4 and all(isinstance(x, (int, float)) for x in v):
                 return True
         return False
+
+
+class PoissonScaleModel(NoiseModel):
+    """Shared parameters of the Poisson-based models: ``beta1`` (normalised raw per
+    photo-electron, > 0) and ``beta2`` (Gaussian read variance, normalised raw^2, >= 0),
+    each one float or 4 per-CFA-site floats. Not registered itself."""
+
+    beta1: SiteParam
+    beta2: SiteParam
+
+    @field_validator("beta1")
+    @classmethod
+    def _check_beta1(cls, v):
+        validate_site_param(v, "beta1")
+        if (site_values(v, name="beta1") <= 0).any():
+            raise ValueError(f"beta1 must be > 0, got {v!r}")
+        return v
+
+    @field_validator("beta2")
+    @classmethod
+    def _check_beta2(cls, v):
+        return validate_site_param(v, "beta2")
+
+    def _maps(self, shape, row0, dtype=np.float32):
+        return (site_map(self.beta1, shape, row0, name="beta1", dtype=dtype),
+                site_map(self.beta2, shape, row0, name="beta2", dtype=dtype))
 
 
 # -- registry -------------------------------------------------------------

@@ -51,6 +51,10 @@ class Clipped(NoiseModel):
         out = self.base.sample_rows(clean_rows, cond, key, row0, out=out, threads=threads)
         return np.clip(out, np.float32(self.low), np.float32(self.high), out=out)
 
+    def sample_stack(self, clean, cond, rng):
+        out = self.base.sample_stack(clean, cond, rng)
+        return np.clip(out, np.float32(self.low), np.float32(self.high), out=out)
+
     def variance(self, clean, cond):
         raise NoiseModelError("model 'clipped': the censored variance has no closed form here; use the base model's")
 

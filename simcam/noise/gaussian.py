@@ -12,7 +12,7 @@ from pydantic import field_validator
 from scipy.special import log_ndtr, ndtr
 
 from ..errors import NoiseModelError
-from .base import NoiseCondition, NoiseModel, SiteParam, check_clean, check_same_shape, register_model, site_map, validate_site_param
+from .base import NoiseCondition, NoiseModel, SiteParam, check_clean, check_same_shape, register_model, site_map, site_values, validate_site_param
 from .kernels import normal_f32
 
 _LOG_SQRT_2PI = 0.5 * np.log(2.0 * np.pi)
@@ -79,6 +79,10 @@ class Gaussian(GaussianFamily):
     @classmethod
     def _chk(cls, v):
         return validate_site_param(v, "sigma")
+
+    def read_split(self):
+        s = site_values(self.sigma, name="sigma")
+        return self.model_copy(update={"sigma": 0.0}), [float(v * v) for v in s]
 
     def _var_map(self, clean, row0, dtype=np.float32):
         s = site_map(self.sigma, clean.shape, row0, name="sigma", dtype=dtype)

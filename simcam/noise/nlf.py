@@ -37,6 +37,9 @@ class NLF(GaussianFamily):
     def _chk(cls, v, info):
         return validate_site_param(v, info.field_name)
 
+    def read_split(self):
+        return self.model_copy(update={"beta2": 0.0}), self.beta2
+
     def _var_map(self, clean, row0, dtype=np.float32):
         b1 = site_map(self.beta1, clean.shape, row0, name="beta1", dtype=dtype)
         b2 = site_map(self.beta2, clean.shape, row0, name="beta2", dtype=dtype)

@@ -19,11 +19,10 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-from pydantic import field_validator
 from scipy.special import gammaln, log_ndtr, logsumexp
 
 from ..errors import NoiseModelError
-from .base import NoiseModel, SiteParam, check_clean, check_same_shape, register_model, site_map, site_values, validate_site_param
+from .base import PoissonScaleModel, check_clean, check_same_shape, register_model
 from .poisson_table import pg_sample_table
 
 #: largest Poisson mean sampled exactly in float32 (integer counts stay exact).
@@ -110,7 +109,7 @@ def pg_logcdf(x: np.ndarray, lam: np.ndarray, scale: np.ndarray, var: np.ndarray
 
 
 @register_model
-class PoissonGaussian(NoiseModel):
+class PoissonGaussian(PoissonScaleModel):
     """``noisy = beta1 * Poisson(clean / beta1) + N(0, beta2)`` (seed eq. 3.6).
 
     Parameters
@@ -124,29 +123,13 @@ class PoissonGaussian(NoiseModel):
     """
 
     type: Literal["poisson_gaussian"] = "poisson_gaussian"
-    beta1: SiteParam
-    beta2: SiteParam
-
-    @field_validator("beta1")
-    @classmethod
-    def _chk1(cls, v):
-        validate_site_param(v, "beta1")
-        if (site_values(v, name="beta1") <= 0).any():
-            raise ValueError(f"beta1 must be > 0, got {v!r}")
-        return v
-
-    @field_validator("beta2")
-    @classmethod
-    def _chk2(cls, v):
-        return validate_site_param(v, "beta2")
-
-    def _maps(self, shape, row0, dtype=np.float32):
-        return (site_map(self.beta1, shape, row0, name="beta1", dtype=dtype),
-                site_map(self.beta2, shape, row0, name="beta2", dtype=dtype))
 
     def _sample_block(self, clean, cond, rng, row0, out):
         b1, b2 = self._maps(clean.shape, row0)
         pg_sample(clean, b1, b2, rng, out, where=f"{cond.source or 'clean'}: poisson_gaussian")
+
+    def read_split(self):
+        return self.model_copy(update={"beta2": 0.0}), self.beta2
 
     def variance(self, clean, cond):
         clean = check_clean(clean)

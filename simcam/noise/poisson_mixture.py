@@ -13,15 +13,15 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-from pydantic import Field, field_validator
+from pydantic import Field
 
 from ..errors import NoiseModelError
-from .base import NoiseModel, SiteParam, check_clean, check_same_shape, register_model, site_map, site_values, validate_site_param
+from .base import PoissonScaleModel, check_clean, check_same_shape, register_model
 from .poisson_gaussian import pg_logcdf, pg_logpdf, pg_sample
 
 
 @register_model
-class PoissonMixture(NoiseModel):
+class PoissonMixture(PoissonScaleModel):
     """Poisson scale mixture (see module docstring).
 
     Parameters
@@ -37,28 +37,9 @@ class PoissonMixture(NoiseModel):
     """
 
     type: Literal["poisson_mixture"] = "poisson_mixture"
-    beta1: SiteParam
-    beta2: SiteParam
     z1: float = Field(1.0, gt=0)
     z2: float = Field(2.0, gt=0)
     p1: float = Field(0.5, ge=0, le=1)
-
-    @field_validator("beta1")
-    @classmethod
-    def _chk1(cls, v):
-        validate_site_param(v, "beta1")
-        if (site_values(v, name="beta1") <= 0).any():
-            raise ValueError(f"beta1 must be > 0, got {v!r}")
-        return v
-
-    @field_validator("beta2")
-    @classmethod
-    def _chk2(cls, v):
-        return validate_site_param(v, "beta2")
-
-    def _maps(self, shape, row0, dtype=np.float32):
-        return (site_map(self.beta1, shape, row0, name="beta1", dtype=dtype),
-                site_map(self.beta2, shape, row0, name="beta2", dtype=dtype))
 
     def _sample_block(self, clean, cond, rng, row0, out):
         b1, b2 = self._maps(clean.shape, row0)

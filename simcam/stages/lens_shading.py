@@ -126,6 +126,13 @@ class LensShading(Stage):
     ``strength`` blends each gain towards 1: ``g' = 1 + strength * (g - 1)``
     (1 = the file's full correction, 0 = none). Frames without GainMaps pass
     through unchanged.
+
+    ``mode: sidd`` reproduces simple-camera-pipeline (the SIDD renderer) for
+    users matching the SIDD benchmark's sRGB: only the FIRST GainMap is used,
+    its plane-0 grid is resized to the half-resolution Bayer-cell grid with
+    OpenCV's ``INTER_LINEAR`` convention (half-pixel centres, edge clamp) and
+    the same gain multiplies all four sites of each cell; the rectangle, pitch
+    and map origin/spacing are ignored. A compatibility mode, not the DNG spec.
     """
 
     type = "lens_shading"
@@ -134,8 +141,11 @@ class LensShading(Stage):
     class Params(StageParams):
         source: Literal["opcodes"] = "opcodes"
         strength: float = Field(1.0, ge=0.0, le=1.0)
+        mode: Literal["dng", "sidd"] = "dng"
 
     def apply(self, frame: RawFrame, drawn=None) -> RawFrame:
+        if self.params.mode == "sidd":
+            return self._apply_sidd(frame)
         maps = [gm for gm in frame.meta.gain_maps(2) if gm.plane == 0]
         if not maps:
             return frame.evolve(step=f"{self.type}(no GainMaps)")
@@ -147,3 +157,35 @@ class LensShading(Stage):
                 g = (1.0 + s * (gain - 1.0)).astype(np.float32)
                 out[_as_slice(rows, gm.row_pitch), _as_slice(cols, gm.col_pitch)] *= g
         return frame.evolve(out, step=self.type)
+
+    def _apply_sidd(self, frame: RawFrame) -> RawFrame:
+        maps = frame.meta.gain_maps(2)
+        if not maps:
+            return frame.evolve(step=f"{self.type}(no GainMaps)")
+        h2, w2 = frame.height // 2, frame.width // 2
+        gain = resize_linear_half_pixel(maps[0].gains[:, :, 0].astype(np.float64), h2, w2)
+        gain = (1.0 + float(self.params.strength) * (gain - 1.0)).astype(np.float32)
+        out = np.array(frame.data, dtype=np.float32, copy=True)
+        for dy in (0, 1):
+            for dx in (0, 1):
+                out[dy:2 * h2:2, dx:2 * w2:2] *= gain
+        return frame.evolve(out, step=f"{self.type}(sidd)")
+
+
+def resize_linear_half_pixel(src: np.ndarray, h: int, w: int) -> np.ndarray:
+    """Bilinear resize of a 2-D grid to ``h x w`` with OpenCV's ``INTER_LINEAR`` mapping.
+
+    Output sample (i, j) reads the source at ``((i + 0.5) * H/h - 0.5, (j + 0.5) * W/w - 0.5)``,
+    clamped to the source's edge samples.
+    """
+    def axis(n_out: int, n_in: int):
+        x = np.clip((np.arange(n_out) + 0.5) * (n_in / n_out) - 0.5, 0.0, n_in - 1)
+        i0 = np.minimum(np.floor(x).astype(np.int64), n_in - 1)
+        i1 = np.minimum(i0 + 1, n_in - 1)
+        return i0, i1, x - i0
+
+    r0, r1, fr = axis(h, src.shape[0])
+    c0, c1, fc = axis(w, src.shape[1])
+    top = src[r0][:, c0] * (1 - fc) + src[r0][:, c1] * fc
+    bottom = src[r1][:, c0] * (1 - fc) + src[r1][:, c1] * fc
+    return top * (1 - fr)[:, None] + bottom * fr[:, None]

@@ -134,16 +134,110 @@ def test_hot_pixel_fractions_and_persistence():
 
 
 def test_spatial_correlation_same_colour_neighbours():
-    c = 0.15
+    """Separable in-plane [c, 1, c] kernel, variance-preserving (closed form, effects/correlation.py):
+    same-colour lag 1 (2 px): 2c / (1 + 2c^2); lag 2 (4 px): c^2 / (1 + 2c^2); diagonal (2, 2): lag1^2;
+    different-colour neighbours (1 px): 0; variance unchanged.
+
+    Sample correlation SE ~ (1 - r^2) / sqrt(n) for independent pairs; the pairs overlap (the field is
+    correlated), which inflates it by at most sqrt(sum over 2-D lags of rho^2) (Bartlett); separable, so
+    sum = (1 + 2 rho1^2 + 2 rho2^2)^2 = 2.33 for c = 0.3 -> factor 1.53, 5 SE x 1.6.
+    """
+    c = 0.3
     m = _comp([{"type": "spatial_correlation", "coefficient": c}], base={"type": "gaussian", "sigma": 0.01})
     x = m.sample(np.zeros((300, 300), np.float32), COND, np.random.default_rng(3))[4:-4, 4:-4].astype(np.float64)
-    r = np.corrcoef(x[:, :-2].ravel(), x[:, 2:].ravel())[0, 1]
-    r1 = np.corrcoef(x[:, :-1].ravel(), x[:, 1:].ravel())[0, 1]
-    n = x[:, 2:].size
-    # correlation SE ~ (1 - r^2) / sqrt(n)
-    assert abs(r - 2 * c / (1 + 4 * c * c)) < 5 * (1 - r * r) / np.sqrt(n)
-    assert abs(r1) < 5 / np.sqrt(n)
-    assert abs(x.var() - 1e-4 * (1 + 4 * c * c)) < 5 * 1e-4 * (1 + 4 * c * c) * np.sqrt(2 / n) * 3
+    n = x[:, 4:].size
+    r1 = 2 * c / (1 + 2 * c * c)
+
+    def corr(a, b):
+        return np.corrcoef(a.ravel(), b.ravel())[0, 1]
+
+    for got, want in ((corr(x[:, :-2], x[:, 2:]), r1), (corr(x[:-2], x[2:]), r1),
+                      (corr(x[:, :-4], x[:, 4:]), c * c / (1 + 2 * c * c)),
+                      (corr(x[:-2, :-2], x[2:, 2:]), r1 * r1),
+                      (corr(x[:, :-1], x[:, 1:]), 0.0), (corr(x[:-1], x[1:]), 0.0)):
+        assert abs(got - want) < 5 * 1.6 * (1 - want * want) / np.sqrt(n), (got, want)
+    # variance of the sample variance of a correlated Gaussian field: 2 v^2 (sum of rho^2 = 2.33) / n; 5 SE
+    assert abs(x.var() - 1e-4) < 5 * 1e-4 * np.sqrt(2 * 2.33 / n)
+
+
+def test_spatial_correlation_acts_on_read_noise_only():
+    """Read noise (beta2) is coupled, shot noise stays white, the mean is not blurred:
+    lag-1 correlation = rho1 * beta2 / (beta1 clean + beta2), variance beta1 clean + beta2 (kept)."""
+    c, b1, b2 = 0.3, 1e-3, 2e-4
+    m = _comp([{"type": "spatial_correlation", "coefficient": c}], base={"type": "poisson_gaussian", "beta1": b1, "beta2": b2})
+    clean = np.full((256, 256), 0.2, np.float32)
+    clean[:, 128:] = 0.6  # an edge: the mean must stay sharp
+    x = m.sample_frames(clean, COND, np.random.default_rng(4), 24).astype(np.float64)
+    mean = x.mean(0)
+    # column means of 24 frames x 256 rows: SE sqrt(8e-4 / 6144) ~ 3.6e-4, x sqrt(1 + 2 rho1 + 2 rho2) = 1.43
+    # for the correlated column -> 5 SE x 1.5
+    assert abs(mean[:, 125].mean() - 0.2) < 5 * 1.5 * 3.6e-4 and abs(mean[:, 130].mean() - 0.6) < 5 * 1.5 * 3.6e-4
+    r = x[:, 4:-4, 132:-4] - 0.6
+    n = r[:, :, 2:].size
+    got = np.corrcoef(r[:, :, :-2].ravel(), r[:, :, 2:].ravel())[0, 1]
+    want = 2 * c / (1 + 2 * c * c) * b2 / (b1 * 0.6 + b2)
+    assert abs(got - want) < 5 * 1.6 / np.sqrt(n)  # SE as above
+    assert abs(r.var() / (b1 * 0.6 + b2) - 1) < 5 * np.sqrt(2 * 2.33 / r.size)  # variance (PTC) kept
+    # frame by frame (sample) gives the same law: lag-1 correlation of one frame, SE 1.6 / sqrt(n / 24)
+    one = m.sample(clean, COND, np.random.default_rng(5)).astype(np.float64)[4:-4, 132:-4] - 0.6
+    got1 = np.corrcoef(one[:, :-2].ravel(), one[:, 2:].ravel())[0, 1]
+    assert abs(got1 - want) < 5 * 1.6 / np.sqrt(one[:, 2:].size)
+
+
+def test_spatial_correlation_needs_a_read_noise_part():
+    from simcam.errors import NoiseModelError
+
+    # a clipped base has no separable read noise (clipping acts on shot + read together)
+    with pytest.raises(NoiseModelError, match="read noise"):
+        _comp([{"type": "spatial_correlation", "coefficient": 0.2}],
+              base={"type": "clipped", "base": {"type": "gaussian", "sigma": 0.01}}).sample(
+            np.zeros((8, 8), np.float32), COND, np.random.default_rng(0))
+
+
+def test_nonlinearity_acts_on_the_noisy_value():
+    """y = x - s x^2 on x ~ N(mu, v): E y = mu - s (mu^2 + v), var y = (1 - 2 s mu)^2 v + 2 s^2 v^2 (exact).
+
+    SEs over N pixels: mean sqrt(var / N), variance var sqrt(2 / (N - 1)) (near-normal y); 5 SE.
+    """
+    s, mu, sd = 0.3, 0.7, 0.05
+    m = _comp([{"type": "nonlinearity", "strength": s}], base={"type": "gaussian", "sigma": sd})
+    y = m.sample_frames(np.full((200, 200), mu, np.float32), COND, np.random.default_rng(5), 8).astype(np.float64).ravel()
+    v = sd * sd
+    ev = mu - s * (mu * mu + v)
+    vv = (1 - 2 * s * mu) ** 2 * v + 2 * s * s * v * v
+    assert abs(y.mean() - ev) < 5 * np.sqrt(vv / y.size)
+    assert abs(y.var(ddof=1) - vv) < 5 * vv * np.sqrt(2 / (y.size - 1))
+    # an expected-signal-only compression would leave var y = v: 0.58^2 v is far from it
+    assert y.var() < 0.5 * v
+
+
+def test_nonlinearity_log_prob_is_a_density():
+    """Change of variables: exp(log_prob) integrates to 1 and its mean is mu - s (mu^2 + v) (quadrature)."""
+    s, mu, sd = 0.3, 0.5, 0.05
+    m = _comp([{"type": "dsnu", "sigma": 0.0}, {"type": "nonlinearity", "strength": s},
+               {"type": "black_level_offset", "offset": 0.01}], base={"type": "gaussian", "sigma": sd})
+    grid = np.linspace(0.0, 0.8, 4001, dtype=np.float64)
+    y = grid.astype(np.float32)
+    p = np.exp(m.log_prob(y[None, :].repeat(2, 0), np.full((2, y.size), mu, np.float32), COND)[0])
+    assert np.trapezoid(p, y) == pytest.approx(1.0, abs=1e-4)
+    assert np.trapezoid(p * y, y) == pytest.approx(mu - s * (mu * mu + sd * sd) + 0.01, abs=1e-4)
+
+
+def test_sample_frames_matches_sample_in_law_and_fixed_pattern():
+    """sample_frames: the same fixed pattern as sample() (same sensor seed), temporal variance beta1 clean + beta2."""
+    m = _comp([{"type": "dsnu", "sigma": 0.01}], base={"type": "poisson_gaussian", "beta1": 1e-3, "beta2": 1e-5}, seed=3)
+    clean = np.full((64, 64), 0.3, np.float32)
+    x = m.sample_frames(clean, COND, np.random.default_rng(0), 40).astype(np.float64)
+    one = m.sample(clean, COND, np.random.default_rng(1)).astype(np.float64)
+    off = m.fixed_patterns(clean.shape)[0]["offset"]
+    # temporal mean over 40 frames: offset + clean, SE sqrt(3.1e-4 / 40) = 2.8e-3 per pixel -> max over 4096 < 5 SE
+    assert np.abs(x.mean(0) - clean - off).max() < 5 * np.sqrt(3.1e-4 / 40)
+    assert np.corrcoef((one - clean).ravel(), off.ravel())[0, 1] > 0.4  # dsnu var 1e-4 vs temporal 3.1e-4
+    v = x.var(0, ddof=1).mean()
+    assert abs(v - 3.1e-4) < 5 * 3.1e-4 * np.sqrt(2 / (39 * 4096))
+    assert x.dtype == np.float64 and m.sample_frames(clean, COND, np.random.default_rng(0), 40).dtype == np.float32
+    np.testing.assert_array_equal(m.sample_frames(clean, COND, np.random.default_rng(0), 3),
+                                  m.sample_frames(clean, COND, np.random.default_rng(0), 3))
 
 
 def test_deterministic_effects_exact_values():

@@ -4,10 +4,11 @@ An effect is a pydantic model (its profile entry) with a ``stage``:
 
 ``"signal"``
     acts on the expected signal before the base noise model (PRNU, channel
-    gain, frame flicker, nonlinearity);
+    gain, frame flicker);
 ``"readout"``
-    acts on the noisy value after the base model (offsets, row/column noise,
-    heavy-tailed read noise, defects, crosstalk, quantization).
+    acts on the noisy value after the base model, in list order (crosstalk,
+    heavy-tailed read noise, row/periodic noise, the sensor/ADC response
+    ``nonlinearity``, offsets, defects, quantization).
 
 Randomness comes in two kinds. ``fixed(shape, rng)`` draws the *fixed pattern*
 (the same for every frame of one sensor): the composite model gives it a
@@ -19,8 +20,10 @@ tiling, like the base models.
 
 ``logprob_role`` says how ``log_prob`` of a composite sees the effect:
 ``"signal"`` (a deterministic transform of the signal, given the fixed
-pattern), ``"offset"`` (a deterministic additive offset), or ``None`` (the
-effect makes the likelihood intractable: the composite refuses).
+pattern), ``"offset"`` (a deterministic additive offset), ``"response"`` (a
+monotonic map of the noisy value with ``inverse`` and ``log_slope``: change
+of variables), or ``None`` (the effect makes the likelihood intractable: the
+composite refuses).
 """
 
 from __future__ import annotations
@@ -52,6 +55,9 @@ class EffectContext:
     fixed: dict[str, Any] = field(default_factory=dict)
     frame: dict[str, Any] = field(default_factory=dict)
     signal: np.ndarray | None = None  # expected signal after the signal-stage effects
+    #: read noise of this frame so far (the base model's signal-independent Gaussian part plus
+    #: heavy-tailed read noise), when an effect of the composite ``needs_read``; else None.
+    read: np.ndarray | None = None
 
     def block_rng(self, block: int) -> np.random.Generator:
         if self.key is None:
@@ -67,6 +73,11 @@ class Effect(BaseModel):
     type: str
     stage: ClassVar[Literal["signal", "readout"]] = "readout"
     logprob_role: ClassVar[str | None] = None
+    #: True for effects acting on the read noise alone (the composite then samples it apart).
+    needs_read: ClassVar[bool] = False
+    #: True when ``apply`` is elementwise or broadcasts a fixed (H, W) map, needs no per-frame
+    #: draw, and so may be given a whole (n, H, W) stack at once (``Composite.sample_frames``).
+    stack_ok: ClassVar[bool] = False
 
     def to_entry(self) -> dict[str, Any]:
         return self.model_dump(mode="json")

@@ -26,8 +26,10 @@ class ColumnFPN(Effect):
     def fixed(self, shape, rng):
         return {"col": (self.sigma * rng.standard_normal(shape[1])).astype(np.float32)}
 
+    stack_ok = True
+
     def apply(self, x, ctx):
-        x += ctx.fixed["col"][None, : x.shape[1]]
+        x += ctx.fixed["col"][: x.shape[-1]]  # broadcasts over rows (and frames)
         return x
 
 
@@ -38,6 +40,7 @@ class DSNU(Effect):
     type: Literal["dsnu"] = "dsnu"
     sigma: float = Field(ge=0)
     logprob_role = "offset"
+    stack_ok = True
 
     def fixed(self, shape, rng):
         return {"offset": (self.sigma * rng.standard_normal(shape)).astype(np.float32)}
@@ -82,6 +85,8 @@ class BlackLevelOffset(Effect):
     def _chk(cls, v):
         return validate_site_param(v, "offset", minimum=None)
 
+    stack_ok = True
+
     def apply(self, x, ctx: EffectContext):
-        x += site_array(self.offset, x.shape, name="offset")
+        x += site_array(self.offset, x.shape[-2:], name="offset")  # broadcasts over frames
         return x

@@ -35,21 +35,51 @@ class ChannelGain(Effect):
 
 @register_effect
 class Nonlinearity(Effect):
-    """Compressive response towards saturation on the signal: ``y = x - strength * x^2``.
+    """Compressive sensor / ADC response on the *noisy* value: ``y = x - strength * x^2``.
 
-    Slope 1 at black, ``1 - strength`` of full scale reached at x = 1 (a 2 %
-    compression at white is ``strength: 0.02``). Monotonic for x < 1/(2 strength),
-    i.e. beyond 1.1 for every allowed strength (<= 0.45).
+    Physics. The charge-to-voltage conversion and the ADC of a real sensor
+    respond non-linearly to the charge actually collected, shot noise
+    included, and to the read noise added before them; so the response acts on
+    the noisy value ``x`` (normalised raw above black: the base model's sample
+    plus every readout effect listed *before* it), not on the expected signal.
+    By the delta method the noise is then scaled by the local slope,
+    ``var(y) ~= (1 - 2 strength mean)^2 var(x)``: the photon-transfer curve
+    (variance against mean) bends, which is what EMVA 1288 R4.0 sec. 6.6 and the
+    calibration loop's ``ptc_curvature`` diagnostic measure. Put it after the
+    temporal readout effects (crosstalk, heavy-tailed read, row and periodic
+    noise) and before fixed offsets (DSNU, column FPN, black-level offset) and
+    quantization, which come after the response in the signal chain.
+
+    Units. ``x`` and ``y`` in normalised raw (0 = black, 1 = white - black);
+    ``strength`` dimensionless: slope 1 at black, full scale compressed to
+    ``1 - strength`` at x = 1 (a 2 % compression at white is ``strength: 0.02``).
+    Negative values give an expansive response. Monotonic for
+    ``x < 1 / (2 strength)``, i.e. beyond 1.1 for every allowed ``strength``
+    (|strength| <= 0.45).
     """
 
     type: Literal["nonlinearity"] = "nonlinearity"
-    strength: float = Field(ge=0, le=0.45)
-    stage = "signal"
-    logprob_role = "signal"
+    strength: float = Field(ge=-0.45, le=0.45)
+    stage = "readout"
+    logprob_role = "response"
+    stack_ok = True
 
     def apply(self, x, ctx):
         x -= np.float32(self.strength) * x * x
         return x
+
+    def inverse(self, y: np.ndarray) -> np.ndarray:
+        """``x`` with ``apply(x) = y`` on the monotonic branch (float64)."""
+        y = np.asarray(y, dtype=np.float64)
+        s = float(self.strength)
+        if s == 0:
+            return y
+        disc = np.maximum(1.0 - 4.0 * s * y, 0.0)
+        return 2.0 * y / (1.0 + np.sqrt(disc))  # = (1 - sqrt(disc)) / (2 s), stable at s -> 0
+
+    def log_slope(self, x: np.ndarray) -> np.ndarray:
+        """``log |dy/dx|`` at ``x`` (float64), the Jacobian term of ``log_prob``."""
+        return np.log(np.abs(1.0 - 2.0 * float(self.strength) * np.asarray(x, dtype=np.float64)))
 
 
 @register_effect
@@ -62,6 +92,7 @@ class Quantization(Effect):
     """
 
     type: Literal["quantization"] = "quantization"
+    stack_ok = True
     range_dn: float = Field(gt=0)
     step_dn: float = Field(1.0, gt=0)
     offset_dn: float = 0.0

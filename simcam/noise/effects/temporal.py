@@ -59,7 +59,12 @@ class HeavyTailRead(Effect):
             u = np.clip(u, 1e-300, None)  # (0, 1)
             rows += (self.scale * tukey_lambda_ppf(u, self.lam)).astype(np.float32)
 
+        if ctx.read is None:
+            per_block(x, ctx, one)
+            return x
+        before = x.copy()
         per_block(x, ctx, one)
+        ctx.read += x - before  # it is read noise: later read-noise effects (crosstalk) see it
         return x
 
 
