@@ -125,3 +125,24 @@ def test_render_bad_override_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert "gamma" in err and "curve" in err and err.count("\n") == 0 and not out.exists()
 
+
+
+def test_render_neutral_override_on_default_pipeline(tmp_path):
+    """The documented example: an explicit neutral overrides the pipeline's as-shot white."""
+    a, b = tmp_path / "a.png", tmp_path / "b.png"
+    assert main(["render", str(EXAMPLE), "-o", str(a)]) == 0
+    assert main(["render", str(EXAMPLE), "-o", str(b), "--set", "white_balance.neutral=[0.66,1.0,0.44]"]) == 0
+    ia, ib = read_image(a), read_image(b)
+    # neutral (0.66, 1, 0.44) vs the file's (0.42, 1, 0.72): less red gain, more blue gain
+    assert ib[..., 0].mean() < ia[..., 0].mean() and ib[..., 2].mean() > ia[..., 2].mean()
+
+
+def test_white_balance_contradictions_are_refused():
+    from simcam.errors import PipelineError
+
+    with pytest.raises(PipelineError, match="not both"):
+        Pipeline.from_dict({"version": 1, "input": "raw", "stages": [
+            {"type": "white_balance", "neutral": [1.0, 1.0, 1.0], "gains": [1.0, 1.0, 1.0]}]})
+    with pytest.raises(PipelineError, match="source: none"):
+        Pipeline.from_dict({"version": 1, "input": "raw", "stages": [
+            {"type": "white_balance", "source": "none", "gains": [1.0, 1.0, 1.0]}]})

@@ -53,7 +53,8 @@ class WhiteBalance(Stage):
     """White balance by channel gains (G = 1); records them as ``meta.white_balance_gains``.
 
     ``source``: ``as_shot`` (the file's white), ``neutral`` (explicit camera neutral,
-    gains = 1 / neutral), ``gains`` (explicit), ``none`` (no change).
+    gains = 1 / neutral), ``gains`` (explicit), ``none`` (no change). An explicit
+    ``neutral`` or ``gains`` given with ``source: as_shot`` overrides the as-shot white.
     """
 
     type = "white_balance"
@@ -69,24 +70,41 @@ class WhiteBalance(Stage):
     def __init__(self, params=None, **kw):
         super().__init__(params, **kw)
         p = self.params
-        if (p.source == "neutral") != (p.neutral is not None):
-            raise StageError("white_balance: neutral: expected [r, g, b] exactly when source is 'neutral'")
-        if (p.source == "gains") != (p.gains is not None):
-            raise StageError("white_balance: gains: expected [r, g, b] exactly when source is 'gains'")
+        if p.neutral is not None and p.gains is not None:
+            raise StageError("white_balance: expected either neutral: [r, g, b] or gains: [r, g, b], not both")
+        if p.source == "neutral" and p.neutral is None:
+            raise StageError("white_balance: neutral: expected [r, g, b] with source: neutral")
+        if p.source == "gains" and p.gains is None:
+            raise StageError("white_balance: gains: expected [r, g, b] with source: gains")
+        if p.source == "none" and (p.neutral is not None or p.gains is not None):
+            raise StageError("white_balance: source: none contradicts the neutral/gains given")
+        if p.source == "neutral" and p.gains is not None or p.source == "gains" and p.neutral is not None:
+            raise StageError(f"white_balance: source: {p.source} contradicts the other of neutral/gains given")
         for name in ("neutral", "gains"):
             v = getattr(p, name)
             if v is not None and not all(np.isfinite(x) and x > 0 for x in v):
                 raise StageError(f"white_balance: {name}: expected three finite positive numbers, got {list(v)}")
 
+    @property
+    def effective_source(self) -> str:
+        """``source``, except that an explicit neutral or gains overrides the as-shot white
+        (so ``--set white_balance.neutral=[...]`` works on a pipeline that says as_shot)."""
+        p = self.params
+        if p.source == "as_shot" and p.neutral is not None:
+            return "neutral"
+        if p.source == "as_shot" and p.gains is not None:
+            return "gains"
+        return p.source
+
     def gains_for(self, frame: RawFrame) -> np.ndarray | None:
         """The gains (R, G, B), G = 1, this stage applies to ``frame`` (None for source: none)."""
-        p = self.params
-        if p.source == "none":
+        p, source = self.params, self.effective_source
+        if source == "none":
             return None
-        if p.source == "gains":
+        if source == "gains":
             g = np.asarray(p.gains, dtype=np.float64)
             return g / g[1]
-        neutral = capture_neutral(frame.meta) if p.source == "as_shot" else np.asarray(p.neutral, dtype=np.float64)
+        neutral = capture_neutral(frame.meta) if source == "as_shot" else np.asarray(p.neutral, dtype=np.float64)
         return neutral[1] / neutral
 
     def apply(self, frame: RawFrame, drawn=None) -> RawFrame:
