@@ -249,22 +249,28 @@ def _load_builtin() -> None:
     from . import clipping, composite, gaussian, nlf, onnx_sampler, poisson_gaussian, poisson_mixture  # noqa: F401
 
 
-def model_from_entry(entry: Any, *, where: str = "model") -> NoiseModel:
-    """Build a model from its profile entry ``{type: ..., **params}`` or raise NoiseModelError."""
-    _load_builtin()
-    if isinstance(entry, NoiseModel):
+def from_registry(entry: Any, registry: dict[str, type], *, base: type, noun: str, expected: list[str],
+                  where: str) -> Any:
+    """Validate a ``{type: ..., **params}`` entry into the registered class, or raise NoiseModelError."""
+    if isinstance(entry, base):
         return entry
     if not isinstance(entry, dict) or "type" not in entry:
         raise NoiseModelError(f"{where}: expected a mapping with a 'type' key, got {entry!r}")
-    cls = _MODELS.get(entry["type"])
+    cls = registry.get(entry["type"])
     if cls is None:
-        raise NoiseModelError(f"{where}.type: unknown noise model {entry['type']!r}; expected one of {', '.join(sorted(_MODELS))}")
+        raise NoiseModelError(f"{where}.type: unknown {noun} {entry['type']!r}; expected one of {', '.join(expected)}")
     try:
         return cls.model_validate(entry)
     except ValidationError as exc:
         raise NoiseModelError(f"{where} ({entry['type']}): {describe_validation_error(exc)}") from None
     except SimcamError as exc:
         raise NoiseModelError(f"{where} ({entry['type']}): {exc}") from None
+
+
+def model_from_entry(entry: Any, *, where: str = "model") -> NoiseModel:
+    """Build a model from its profile entry ``{type: ..., **params}`` or raise NoiseModelError."""
+    _load_builtin()
+    return from_registry(entry, _MODELS, base=NoiseModel, noun="noise model", expected=sorted(_MODELS), where=where)
 
 
 def describe_validation_error(exc: ValidationError) -> str:

@@ -33,10 +33,10 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, ClassVar, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict
 
-from ...errors import NoiseModelError, SimcamError
-from ..base import BLOCK_ROWS, block_rng, describe_validation_error, site_map, site_values
+from ...errors import NoiseModelError
+from ..base import BLOCK_ROWS, block_rng, from_registry, site_map, site_values
 
 EFFECT_NAMES = ("row_noise", "column_fpn", "dsnu", "prnu", "hot_pixels", "heavy_tail_read", "quantization",
                 "spatial_correlation", "periodic_pattern", "black_level_offset", "frame_flicker", "nonlinearity",
@@ -125,19 +125,7 @@ def effect_types() -> dict[str, type[Effect]]:
 
 def effect_from_entry(entry: Any, *, where: str = "effect") -> Effect:
     _load()
-    if isinstance(entry, Effect):
-        return entry
-    if not isinstance(entry, dict) or "type" not in entry:
-        raise NoiseModelError(f"{where}: expected a mapping with a 'type' key, got {entry!r}")
-    cls = _EFFECTS.get(entry["type"])
-    if cls is None:
-        raise NoiseModelError(f"{where}.type: unknown effect {entry['type']!r}; expected one of {', '.join(EFFECT_NAMES)}")
-    try:
-        return cls.model_validate(entry)
-    except ValidationError as exc:
-        raise NoiseModelError(f"{where} ({entry['type']}): {describe_validation_error(exc)}") from None
-    except SimcamError as exc:
-        raise NoiseModelError(f"{where} ({entry['type']}): {exc}") from None
+    return from_registry(entry, _EFFECTS, base=Effect, noun="effect", expected=list(EFFECT_NAMES), where=where)
 
 
 def per_block(x: np.ndarray, ctx: EffectContext, fn: Callable[[np.ndarray, np.random.Generator], None]) -> None:
