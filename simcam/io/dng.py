@@ -322,16 +322,7 @@ def _meta_from_tiff(tif, path: Path) -> tuple[CameraMeta, Any]:
     rep = (1, 1) if rep is None else tuple(int(x) for x in rep)
     if len(rep) != 2 or min(rep) < 1:
         raise DngError(f"{tags.where('BlackLevelRepeatDim')}: {rep}; expected (rows, cols) >= 1")
-    bl = tags.numbers("BlackLevel")
-    if bl is None:
-        black = np.zeros(rep)
-    elif bl.size == rep[0] * rep[1]:
-        black = bl.reshape(rep)
-    elif bl.size == 1:
-        black = np.full(rep, bl[0])
-    else:
-        raise DngError(f"{tags.where('BlackLevel')}: {bl.size} values; expected {rep[0]}x{rep[1]} "
-                       f"(BlackLevelRepeatDim)")
+    black = black_level_pattern(tags.numbers("BlackLevel"), rep, where=tags.where("BlackLevel"))
     aw = (active_area[3] - active_area[1]) if active_area else w
     ah = (active_area[2] - active_area[0]) if active_area else h
     dh, dv = tags.numbers("BlackLevelDeltaH"), tags.numbers("BlackLevelDeltaV")
@@ -437,6 +428,21 @@ def _meta_from_tiff(tif, path: Path) -> tuple[CameraMeta, Any]:
         extra=extra,
     )
     return meta, main
+
+
+def black_level_pattern(values: np.ndarray | None, rep: tuple[int, int], *, where: str,
+                        error: type[Exception] = DngError) -> np.ndarray:
+    """The BlackLevel tag as a ``rep`` = (rows, cols) array (DNG 1.6, BlackLevel / BlackLevelRepeatDim).
+
+    No tag means 0; a single value fills the pattern; otherwise exactly rows*cols values.
+    """
+    if values is None:
+        return np.zeros(rep)
+    if values.size == rep[0] * rep[1]:
+        return values.reshape(rep)
+    if values.size == 1:
+        return np.full(rep, values[0])
+    raise error(f"{where}: {values.size} values; expected {rep[0]}x{rep[1]} (BlackLevelRepeatDim)")
 
 
 def read_dng_meta(path: str | os.PathLike) -> CameraMeta:

@@ -23,7 +23,7 @@ import numpy as np
 from ..cfa import BAYER_PATTERNS, shift_pattern
 from ..errors import DatasetError, MetadataError
 from ..frame import CameraMeta
-from .dng import PLANE_COLOR_LETTERS, T
+from .dng import PLANE_COLOR_LETTERS, T, black_level_pattern
 from .opcodes import parse_opcode_list
 
 _TAG_NAMES = {code: name for name, code in T.items()}
@@ -207,15 +207,7 @@ def read_sidd_meta(path: str | os.PathLike) -> CameraMeta:
 
     rep = _arr(tags.get("BlackLevelRepeatDim"))
     rep = (1, 1) if rep is None else tuple(int(x) for x in rep)
-    bl = _arr(tags.get("BlackLevel"))
-    if bl is None:
-        black = np.zeros(rep)
-    elif bl.size == rep[0] * rep[1]:
-        black = bl.reshape(rep)
-    elif bl.size == 1:
-        black = np.full(rep, bl[0])
-    else:
-        raise MetadataError(f"{where('BlackLevel')}: {bl.size} values; expected {rep[0] * rep[1]}")
+    black = black_level_pattern(_arr(tags.get("BlackLevel")), rep, where=where("BlackLevel"), error=MetadataError)
     white = scalar("WhiteLevel")
     if white is None:
         raise MetadataError(f"{where('WhiteLevel')}: missing; expected the sensor white level")
