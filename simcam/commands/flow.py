@@ -18,6 +18,9 @@ def export(
         None, "--published-npz", help="Export the authors' released weights (CC BY-NC-SA 4.0: never redistribute)."
     ),
     temperature: Optional[float] = typer.Option(None, "--temperature", help="Default sampling temperature stored in the metadata."),
+    legacy_iso: bool = typer.Option(
+        False, "--legacy-iso",
+        help="Reproduce the released code's ISO handling (factor 1 for ISOs other than its five) instead of log-ISO interpolation."),
 ) -> None:
     """Export a Noise Flow to ONNX: model.onnx (sampler) and model.loglik.onnx."""
     from ..errors import NoiseModelError
@@ -41,7 +44,7 @@ def export(
     for p in (ckpt, published_npz):
         if p is not None and Path(out).resolve() == Path(p).resolve():
             raise NoiseModelError(f"--out {out}: would overwrite the input {p}")
-    sampler, loglik = export_onnx(flow, out, source=source)
+    sampler, loglik = export_onnx(flow, out, source=source, legacy_iso=legacy_iso)
     typer.echo(f"wrote {sampler} and {loglik} (cameras {flow.config.cameras}, ISO {flow.config.iso_range[0]:g}..{flow.config.iso_range[1]:g})")
 
 

@@ -84,11 +84,12 @@ def build_published_flow(weights: str):
 
 
 @functools.lru_cache(maxsize=None)
-def build_published_onnx(weights: str):
+def build_published_onnx(weights: str, legacy_iso: bool = False):
     """Published weights exported to a temporary dir only (CC BY-NC-SA: never into the repo)."""
     from simcam.noise.flow.export import export_onnx
 
-    return export_onnx(build_published_flow(weights), _tmpdir() / "published" / "model.onnx")
+    name = "published-legacy" if legacy_iso else "published"
+    return export_onnx(build_published_flow(weights), _tmpdir() / name / "model.onnx", legacy_iso=legacy_iso)
 
 
 @pytest.fixture
@@ -121,3 +122,11 @@ def published_onnx():
     pytest.importorskip("torch")
     pytest.importorskip("onnxruntime")
     return build_published_onnx(_weights())
+
+
+@pytest.fixture
+def published_onnx_legacy():
+    """The published weights exported with the released code's ISO handling (golden case 7)."""
+    pytest.importorskip("torch")
+    pytest.importorskip("onnxruntime")
+    return build_published_onnx(_weights(), legacy_iso=True)

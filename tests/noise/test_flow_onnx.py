@@ -15,7 +15,7 @@ torch = pytest.importorskip("torch")
 onnx = pytest.importorskip("onnx")
 pytest.importorskip("onnxruntime")
 
-from flow_helpers import nhwc_latent_to_nchw, nhwc_released_to_nchw, published_onnx, small_flow, small_onnx  # noqa: E402,F401  (helpers, fixtures)
+from flow_helpers import nhwc_latent_to_nchw, nhwc_released_to_nchw, published_onnx, published_onnx_legacy, small_flow, small_onnx  # noqa: E402,F401  (helpers, fixtures)
 
 from simcam.noise.onnx_sampler import OnnxNoiseFlow  # noqa: E402
 
@@ -68,14 +68,18 @@ def test_graph_rules_and_metadata(small_onnx):
 
 
 @pytest.mark.shared_data
-def test_golden_vectors_through_onnx(published_onnx):
+def test_golden_vectors_through_onnx(published_onnx, published_onnx_legacy):
+    """All 8 cases; case 7 (ISO 200, not one of the released five) needs the export made with
+    --legacy-iso, which reproduces the released code's factor-1 fallback."""
     from tests.conftest import shared_path
 
     g = np.load(shared_path("noiseflow/golden.npz"))
-    sampler = OnnxNoiseFlow(published_onnx[0], threads=1)
+    default = OnnxNoiseFlow(published_onnx[0], threads=1)
+    legacy = OnnxNoiseFlow(published_onnx_legacy[0], threads=1)
+    assert legacy.meta["iso_mode"] == "legacy-released" and default.meta["iso_mode"] == "log-interpolated"
+    assert (~g["iso_supported"].astype(bool)).sum() == 1
     for k in range(8):
-        if not g["iso_supported"][k]:
-            continue  # ISO 200: the export interpolates; the released factor-1 fallback is torch-only (legacy_iso)
+        sampler = default if g["iso_supported"][k] else legacy
         clean = nhwc_released_to_nchw(g["clean"][k])
         noise = nhwc_released_to_nchw(g["noise"][k])
         lat = nhwc_latent_to_nchw(g["latent"][k])

@@ -34,7 +34,7 @@ class _Graph(torch.nn.Module):
 
     def cond(self, clean, iso, camera):
         knots = self.flow.iso_knots.to(clean.dtype)
-        return L.Cond(clean, iso, L.iso_weights(iso, knots), camera)
+        return L.Cond(clean, iso, L.iso_weights(iso, knots, legacy=self.flow.config.legacy_iso), camera)
 
 
 class SamplerGraph(_Graph):
@@ -66,6 +66,7 @@ def metadata(flow: NoiseFlow, *, role: str, source: str) -> dict[str, str]:
         "cameras": json.dumps(list(cfg.cameras)),
         "default_temperature": repr(float(cfg.default_temperature)),
         "arch": cfg.arch,
+        "iso_mode": "legacy-released" if cfg.legacy_iso else "log-interpolated",
         "source": source,
     }
 
@@ -93,7 +94,7 @@ def _export_one(module, args, names_in, names_out, path, meta):
     onnx.save(model, str(path))
 
 
-def export_onnx(flow: NoiseFlow, out, *, source: str = "simcam") -> tuple[Path, Path]:
+def export_onnx(flow: NoiseFlow, out, *, source: str = "simcam", legacy_iso: bool = False) -> tuple[Path, Path]:
     """Write the sampler ``out`` and the likelihood graph beside it.
 
     Parameters
@@ -104,6 +105,10 @@ def export_onnx(flow: NoiseFlow, out, *, source: str = "simcam") -> tuple[Path, 
         Sampler path ending in ``.onnx``; the likelihood goes to ``<stem>.loglik.onnx``.
     source : str
         Provenance written to the metadata (e.g. the licence of published weights).
+    legacy_iso : bool
+        Reproduce the released code's ISO handling (one-hot on an exact knot, factor
+        exp(0) = 1 for any other ISO; metadata ``iso_mode: legacy-released``) instead of
+        log-ISO interpolation. Only for matching the authors' golden vectors.
 
     Returns
     -------
@@ -116,7 +121,7 @@ def export_onnx(flow: NoiseFlow, out, *, source: str = "simcam") -> tuple[Path, 
     out.parent.mkdir(parents=True, exist_ok=True)
     flow = copy.deepcopy(flow).float().eval()
     flow.config = copy.deepcopy(flow.config)
-    flow.config.legacy_iso = False
+    flow.config.legacy_iso = bool(legacy_iso)
     flow.freeze()
     b, h, w = 2, 8, 6
     g = torch.Generator().manual_seed(0)
