@@ -50,7 +50,7 @@ def export(
 
 @flow_app.command("train")
 def train(
-    data: Path = typer.Argument(..., help="Patch set .npz (clean, noise|noisy, iso, camera) or a folder of SIDD .MAT pairs."),
+    data: Path = typer.Argument(..., help="Patch set .npz (clean, noise|noisy, iso, camera), a folder of SIDD .MAT pairs, or a folder of DNG bursts (frames + clean.dng or gt.npz)."),
     out: Path = typer.Option(..., "--out", "-o", help="Output folder: last.pt, best.pt, metrics.csv, metrics.png."),
     epochs: int = typer.Option(10, "--epochs", min=1),
     batch_size: int = typer.Option(64, "--batch-size", min=1),

@@ -4,7 +4,8 @@ A *patch set* is a dict of arrays:
 ``clean`` float32 [N, 4, h, w] (packed, :data:`simcam.cfa.PACK_OFFSETS` order,
 normalised raw), ``noise`` float32 [N, 4, h, w] (noisy - clean), ``iso`` float64 [N],
 ``camera`` [N] (str). Sources: a ``.npz`` with those keys (``noisy`` may replace
-``noise``), a folder of SIDD-style ``.MAT`` pairs, or pairs synthesised from an NLF
+``noise``), a folder of SIDD-style ``.MAT`` pairs, DNG bursts with a ground truth
+(``clean.dng`` or ``gt.npz``), or pairs synthesised from an NLF
 table (seed eq. 3.8: ``var = beta1 * clean + beta2``).
 """
 
@@ -204,6 +205,26 @@ def _read_mat(path: Path) -> np.ndarray:
         raise DatasetError(f"{path}: cannot read as a MATLAB file ({exc})") from None
 
 
+def _add_patches(parts: dict, noisy: np.ndarray, gt: np.ndarray, rng: np.random.Generator, count: int,
+                 size: int, *, where: str) -> None:
+    """Append ``count`` packed patch pairs of ``2*size`` mosaic pixels at random even offsets.
+
+    Packing is by position (:data:`simcam.cfa.PACK_OFFSETS`); the noise is
+    ``clip(noisy, 0, 1) - clip(clean, 0, 1)`` as in the Noise Flow code.
+    """
+    from ...cfa import pack
+
+    s = 2 * size
+    if noisy.shape[0] < s or noisy.shape[1] < s:
+        raise DatasetError(f"{where}: image {noisy.shape} smaller than a {s}x{s} patch")
+    ys = 2 * rng.integers(0, (noisy.shape[0] - s) // 2 + 1, count)
+    xs = 2 * rng.integers(0, (noisy.shape[1] - s) // 2 + 1, count)
+    for y, x in zip(ys, xs):
+        c = np.clip(gt[y : y + s, x : x + s], 0, 1)
+        parts["clean"].append(pack(c))
+        parts["noise"].append(pack(np.clip(noisy[y : y + s, x : x + s], 0, 1) - c))
+
+
 def load_sidd_pairs(root, *, patches_per_image: int = 64, size: int = 32, seed: int = 0) -> dict:
     """Patch set from SIDD-style folders ``SSSS_III_CC_IIIII_...`` holding
     ``*NOISY_RAW_*.MAT`` and ``*GT_RAW_*.MAT`` (normalised raw mosaics).
@@ -213,8 +234,6 @@ def load_sidd_pairs(root, *, patches_per_image: int = 64, size: int = 32, seed: 
     (:data:`simcam.cfa.PACK_OFFSETS`). Noise is ``clip(noisy,0,1) - clip(clean,0,1)``
     as in the Noise Flow code.
     """
-    from ...cfa import pack
-
     root = Path(root)
     dirs = sorted(d for d in root.rglob("*") if d.is_dir() and _SIDD_DIR.match(d.name))
     if not dirs:
@@ -230,17 +249,8 @@ def load_sidd_pairs(root, *, patches_per_image: int = 64, size: int = 32, seed: 
             noisy, gt = _read_mat(nf), _read_mat(gf)
             if noisy.shape != gt.shape or noisy.ndim != 2:
                 raise DatasetError(f"{nf}: shape {noisy.shape} vs ground truth {gt.shape}; expected equal 2-D mosaics")
-            s = 2 * size
-            if noisy.shape[0] < s or noisy.shape[1] < s:
-                raise DatasetError(f"{nf}: image {noisy.shape} smaller than a {s}x{s} patch")
             rng = np.random.default_rng(np.random.SeedSequence([seed, d_i, f_i]))
-            ys = 2 * rng.integers(0, (noisy.shape[0] - s) // 2 + 1, patches_per_image)
-            xs = 2 * rng.integers(0, (noisy.shape[1] - s) // 2 + 1, patches_per_image)
-            for y, x in zip(ys, xs):
-                c = np.clip(gt[y : y + s, x : x + s], 0, 1)
-                n = np.clip(noisy[y : y + s, x : x + s], 0, 1) - c
-                parts["clean"].append(pack(c))
-                parts["noise"].append(pack(n))
+            _add_patches(parts, noisy, gt, rng, patches_per_image, size, where=str(nf))
             parts["iso"].append(np.full(patches_per_image, float(iso)))
             parts["camera"].append(np.full(patches_per_image, cam))
     if not parts["clean"]:
@@ -251,11 +261,63 @@ def load_sidd_pairs(root, *, patches_per_image: int = 64, size: int = 32, seed: 
     })
 
 
+def load_dng_bursts(root, *, patches_per_image: int = 64, size: int = 32, seed: int = 0) -> dict:
+    """Patch set from DNG bursts with a ground truth.
+
+    Every folder under ``root`` (``root`` included) that holds noisy frames
+    ``*.dng`` plus a ground truth — ``clean.dng`` (as written by ``simcam synth``)
+    or ``gt.npz`` with key ``gt`` (as written by ``simcam gt``: normalised raw of
+    the whole stored image) — is one burst. Frames are normalised with their own
+    black/white levels (the ``normalize`` stage, whole stored image); ISO from the
+    EXIF tags, camera from ``UniqueCameraModel`` (else Make Model).
+    """
+    from ...io.dng import read_dng
+    from ...stages.raw import Normalize
+
+    root = Path(root)
+    norm = Normalize()
+    dirs = sorted({p.parent for p in root.rglob("*.dng")} | ({root} if any(root.glob("*.dng")) else set()))
+    parts = {k: [] for k in KEYS}
+    for d_i, d in enumerate(dirs):
+        frames = sorted(p for p in d.glob("*.dng") if p.name != "clean.dng")
+        if not frames:
+            continue
+        if (d / "clean.dng").is_file():
+            gt = norm.apply(read_dng(d / "clean.dng")).data
+        elif (d / "gt.npz").is_file():
+            with np.load(d / "gt.npz") as z:
+                if "gt" not in z:
+                    raise DatasetError(f"{d / 'gt.npz'}: missing array 'gt' (as written by simcam gt)")
+                gt = np.asarray(z["gt"], dtype=np.float32)
+        else:
+            raise DatasetError(f"{d}: {len(frames)} DNG frames but no ground truth; expected clean.dng or gt.npz beside them")
+        for f_i, f in enumerate(frames):
+            frame = read_dng(f)
+            if frame.meta.iso is None:
+                raise DatasetError(f"{f}: ISO: missing from the tags; expected the capture's ISO")
+            noisy = norm.apply(frame).data
+            if noisy.shape != gt.shape:
+                raise DatasetError(f"{f}: shape {noisy.shape} differs from its ground truth {gt.shape}")
+            camera = frame.meta.unique_camera_model or f"{frame.meta.make} {frame.meta.model}".strip()
+            rng = np.random.default_rng(np.random.SeedSequence([seed, d_i, f_i]))
+            _add_patches(parts, noisy, gt, rng, patches_per_image, size, where=str(f))
+            parts["iso"].append(np.full(patches_per_image, float(frame.meta.iso)))
+            parts["camera"].append(np.full(patches_per_image, camera))
+    if not parts["clean"]:
+        raise DatasetError(f"{root}: no DNG bursts (folders of *.dng frames with clean.dng or gt.npz)")
+    return check_patch_set({
+        "clean": np.stack(parts["clean"]), "noise": np.stack(parts["noise"]),
+        "iso": np.concatenate(parts["iso"]), "camera": np.concatenate(parts["camera"]),
+    }, where=str(root))
+
+
 def load_data(path, **kw) -> dict:
-    """A patch set from ``.npz`` or a folder of SIDD .MAT pairs."""
+    """A patch set from ``.npz``, a folder of SIDD .MAT pairs, or a folder of DNG bursts."""
     path = Path(path)
     if path.is_file() and path.suffix == ".npz":
         return load_npz(path)
     if path.is_dir():
-        return load_sidd_pairs(path, **kw)
-    raise DatasetError(f"{path}: expected a .npz patch set or a folder of SIDD .MAT pairs")
+        if any(d.is_dir() and _SIDD_DIR.match(d.name) for d in path.rglob("*")):
+            return load_sidd_pairs(path, **kw)
+        return load_dng_bursts(path, **kw)
+    raise DatasetError(f"{path}: expected a .npz patch set, a folder of SIDD .MAT pairs or a folder of DNG bursts")
