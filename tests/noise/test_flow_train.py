@@ -163,7 +163,6 @@ def test_cli_train_and_export(tmp_path):
     assert main(["flow", "export", str(tmp_path / "missing.pt"), "--out", str(tmp_path / "x.onnx")]) == 2
 
 
-@pytest.mark.slow
 def test_training_recovers_sidd_pixel_nlf(tmp_path):
     """Acceptance: GP NLF pairs (ISO 100-1600), 400 patches per ISO, 32x32, 2 epochs.
 
