@@ -24,7 +24,8 @@ def write_ground_truth_dng(path: str | Path, result, burst) -> Path:
     if meta is None or meta.cfa is None:
         raise DatasetError(f"{path}: DNG output needs a Bayer burst read from DNG files (its metadata is copied); "
                            "write the .npz instead")
-    gt = np.where(np.isfinite(result.gt), result.gt, 0.0).astype(np.float32)
+    # normalised 1.0 is the white level: estimates above it (censored fits) clip there, as documented
+    gt = np.minimum(np.where(np.isfinite(result.gt), result.gt, 0.0), 1.0).astype(np.float32)
     meta = meta.replace(source="", noise_profile=None)
     return write_dng(path, RawFrame(gt, meta, kind="raw"), protect=tuple(burst.names),
                      software="simcam gt (ground truth from a burst)")

@@ -39,7 +39,10 @@ class GroundTruthConfig:
     method: str = "wls"               #: robust mean: wls (seed), mle (censored MLE) or mean (plain)
     refine: int = 0                   #: Gauss-Newton steps on eq. 5.10 after the closed form (wls)
     uncensored_mean: bool = True      #: pixels without censored samples get the plain mean (efficient)
-    nlf: tuple[float, float] | None = None  #: known (beta1, beta2) for wls: sigma not fitted (extension)
+    #: wls sigma: "auto" = sigma from an NLF (beta1, beta2) fitted to the burst's own unclipped pixels
+    #: (extension: far less noisy than a per-pixel sigma on clipped pixels); a known (beta1, beta2);
+    #: or None = sigma fitted per pixel as in the seed (eq. 5.10)
+    nlf: tuple[float, float] | str | None = "auto"
     min_samples: int = 3              #: fewest uncensored samples for a fit; fewer -> fallback, invalid
     alignment: str = "local"          #: local (TPS from patch shifts), global (one shift), none
     patch: int = 512                  #: patch size, mosaic pixels (seed: 512); shrinks for small frames
@@ -69,6 +72,52 @@ class GroundTruthConfig:
             raise DatasetError(f"ground truth: interp_order: expected 1 or 3, got {self.interp_order}")
         if self.min_frames < 3:
             raise DatasetError(f"ground truth: min_frames: expected >= 3, got {self.min_frames}")
+        if isinstance(self.nlf, str) and self.nlf != "auto":
+            raise DatasetError(f"ground truth: nlf: expected 'auto', (beta1, beta2) or None, got {self.nlf!r}")
+
+
+def fit_burst_nlf(store, kept, shape, rows: int, *, max_tiles: int = 64, bins: int = 64):
+    """Fit ``var = beta1 * mean + beta2`` (seed eq. 3.8) to the aligned burst's unclipped pixels.
+
+    Per-pixel temporal mean and variance (ddof 1) of pixels with no censored or missing
+    sample, from up to ``max_tiles`` evenly spread row tiles; pixels binned by mean
+    (quantiles), then weighted least squares with weights ``count / var_bin^2`` (the
+    variance of a sample variance is ``2 var^2 / (n - 1)``). Returns ``(beta1, beta2)``
+    (beta1 > 0, beta2 >= 0), or None when too few pixels or a degenerate fit.
+    """
+    H, W = shape
+    starts = list(range(0, H, rows))
+    step = max(1, len(starts) // max_tiles)
+    means, vars_ = [], []
+    for r0 in starts[::step]:
+        block = store.rows(kept, r0, min(H, r0 + rows)).reshape(kept.size, -1).astype(np.float64)
+        ok = np.isfinite(block).all(axis=0)
+        if ok.any():
+            b = block[:, ok]
+            means.append(b.mean(axis=0))
+            vars_.append(b.var(axis=0, ddof=1))
+    if not means:
+        return None
+    m, v = np.concatenate(means), np.concatenate(vars_)
+    if m.size < 4 * bins:
+        return None
+    edges = np.unique(np.quantile(m, np.linspace(0, 1, bins + 1)))
+    if edges.size < 3:  # (nearly) one intensity: the slope is not identifiable
+        return None
+    idx = np.clip(np.searchsorted(edges, m, side="right") - 1, 0, edges.size - 2)
+    cnt = np.bincount(idx, minlength=edges.size - 1).astype(np.float64)
+    use = cnt > 1
+    mb = np.bincount(idx, weights=m, minlength=cnt.size)[use] / cnt[use]
+    vb = np.bincount(idx, weights=v, minlength=cnt.size)[use] / cnt[use]
+    w = cnt[use] / np.maximum(vb, 1e-30) ** 2
+    A = np.stack([mb, np.ones_like(mb)], axis=1)
+    try:
+        beta1, beta2 = np.linalg.solve(A.T @ (A * w[:, None]), A.T @ (w * vb))
+    except np.linalg.LinAlgError:
+        return None
+    if not (np.isfinite(beta1) and np.isfinite(beta2)) or beta1 <= 0:
+        return None
+    return float(beta1), float(max(beta2, 0.0))
 
 
 @dataclass
@@ -340,10 +389,15 @@ def _run(burst, cfg, store, shape, cfa, lo, hi, dmap, dmask, timing, t0, progres
     kw: dict[str, Any] = {"min_samples": cfg.min_samples}
     if cfg.method != "mean":
         kw["uncensored_mean"] = cfg.uncensored_mean
+    nlf_used = None
     if cfg.method == "wls":
         kw["refine"] = cfg.refine
-        if cfg.nlf is not None:
-            kw["nlf"] = tuple(float(v) for v in cfg.nlf)
+        if isinstance(cfg.nlf, str):
+            nlf_used = fit_burst_nlf(store, kept, shape, max(1, int(cfg.tile_pixels) // shape[1]))
+        elif cfg.nlf is not None:
+            nlf_used = tuple(float(v) for v in cfg.nlf)
+        if nlf_used is not None:
+            kw["nlf"] = nlf_used
     # censored samples are marked +-inf above, so the clip points themselves only matter for MLE
     flo, fhi = (lo, hi)
     tiles = list(range(0, H, rows))
@@ -385,6 +439,9 @@ def _run(burst, cfg, store, shape, cfa, lo, hi, dmap, dmask, timing, t0, progres
             "per_frame": per_frame,
         },
         "robust_mean": {"method": cfg.method, "refine": cfg.refine if cfg.method == "wls" else None,
+                        "nlf": list(nlf_used) if nlf_used is not None else None,
+                        "nlf_source": ("burst fit" if isinstance(cfg.nlf, str) else "given" if cfg.nlf is not None
+                                       else "per-pixel sigma") if cfg.method == "wls" else None,
                         "uncensored_mean": cfg.uncensored_mean if cfg.method != "mean" else None,
                         "pixels_with_censored_samples": int(np.count_nonzero(n_cens)),
                         "fallback_pixels": int(np.count_nonzero(~valid)),
