@@ -139,3 +139,21 @@ def test_burst_nlf_fit_recovers_the_noise_level_function():
     seed_cfg = GroundTruthConfig(alignment="none", intensity="none", drop_outliers=False, nlf=None)
     g_seed = estimate_ground_truth(Burst.from_arrays([sb.frame(i) for i in range(sb.n)], cfa="RGGB"), config=seed_cfg)
     assert g_seed.report["robust_mean"]["nlf_source"] == "per-pixel sigma"
+
+
+@pytest.mark.slow
+def test_acceptance_run_synthetic_dng_burst():
+    """experiments/gt_synthetic_dng.py (768², 40 DNG frames + 30 darks; clipping, hot pixels,
+    flicker, drift; ~40 s): MSE below the plain mean's and global alignment's, and on clipped
+    pixels within 20 % of the unclipped-mean oracle's."""
+    import re
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[2] / "experiments" / "gt_synthetic_dng.py"
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, check=True).stdout
+    ratio = lambda label: float(re.search(re.escape(label) + r" = ([0-9.]+)", out).group(1))  # noqa: E731
+    assert ratio("pipeline MSE / plain mean of raw frames") < 0.5
+    assert ratio("/ global alignment") < 0.9
+    assert ratio("clipped pixels: WLS / oracle") <= 1.2
