@@ -78,7 +78,21 @@ def _sum_chw(x):
     return x.flatten(1).sum(dim=1)
 
 
-class SignalDependentPublished(nn.Module):
+class _SignalDependent(nn.Module):
+    """A per-pixel scale layer: noise -> latent divides by ``scale(cond)``, ``logdet = -sum log s``."""
+
+    def scale(self, cond: Cond):  # pragma: no cover - defined by subclasses
+        raise NotImplementedError
+
+    def to_latent(self, h, cond):
+        s = self.scale(cond)
+        return h / s, -_sum_chw(torch.log(s))
+
+    def from_latent(self, h, cond):
+        return h * self.scale(cond)
+
+
+class SignalDependentPublished(_SignalDependent):
     """Signal-dependent layer of the released model (scope ``model/sdn_gain``).
 
     ``psi = exp(cam_params[:, m])``, ``gamma = exp(gain_params(ISO) * psi2) * ISO``,
@@ -104,15 +118,8 @@ class SignalDependentPublished(nn.Module):
         var = b1[:, None, None, None] * torch.clamp(cond.clean, min=0.0) + b2[:, None, None, None]
         return torch.sqrt(var)
 
-    def to_latent(self, h, cond):
-        s = self.scale(cond)
-        return h / s, -_sum_chw(torch.log(s))
 
-    def from_latent(self, h, cond):
-        return h * self.scale(cond)
-
-
-class SignalDependentNLF(nn.Module):
+class SignalDependentNLF(_SignalDependent):
     """Signal-dependent layer of the paper (seed eq. 6.10): ``s = sqrt(beta1 I + beta2)``.
 
     ``beta1 = exp(b1)``, ``beta2 = exp(b2)`` (initialised ``b1 = -5``, ``b2 = 0``).
@@ -139,13 +146,6 @@ class SignalDependentNLF(nn.Module):
             :, None, None, None
         ]
         return torch.sqrt(var)
-
-    def to_latent(self, h, cond):
-        s = self.scale(cond)
-        return h / s, -_sum_chw(torch.log(s))
-
-    def from_latent(self, h, cond):
-        return h * self.scale(cond)
 
 
 class GainScalar(nn.Module):
