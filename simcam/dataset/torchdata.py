@@ -184,7 +184,20 @@ class PatchMaker:
 
 
 # ------------------------------------------------------------------------------- datasets
-class NoisyPatchDataset(torch.utils.data.Dataset):
+class _EpochedPatches:
+    """What the synthetic-noise datasets share: a :class:`PatchMaker` and the current epoch."""
+
+    maker: "PatchMaker"
+    epoch: int
+
+    @property
+    def needs_spawn(self) -> bool:
+        return self.maker.needs_spawn
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = int(epoch)
+
+class NoisyPatchDataset(_EpochedPatches, torch.utils.data.Dataset):
     """Map-style dataset of ``length`` noisy/clean packed patches per epoch.
 
     Parameters
@@ -213,13 +226,6 @@ class NoisyPatchDataset(torch.utils.data.Dataset):
         self.maker = PatchMaker(sources, noise, patch_size=patch_size, seed=seed, cfa_out=cfa_out,
                                 unprocess=unprocess, cfa=cfa)
         self.length = int(length)
-        self.epoch = int(epoch)
-
-    @property
-    def needs_spawn(self) -> bool:
-        return self.maker.needs_spawn
-
-    def set_epoch(self, epoch: int) -> None:
         self.epoch = int(epoch)
 
     def __len__(self) -> int:
@@ -275,7 +281,7 @@ class PairPatchDataset(torch.utils.data.Dataset):
                 "clean": torch.from_numpy(np.ascontiguousarray(pack(clean[sl]))), "meta": meta}
 
 
-class NoisyPatchStream(torch.utils.data.IterableDataset):
+class NoisyPatchStream(_EpochedPatches, torch.utils.data.IterableDataset):
     """Iterable dataset over a file list: ``patches_per_file`` patches from each file, files
     in a per-epoch random order (``SeedSequence([seed, e])``).
 
@@ -292,13 +298,6 @@ class NoisyPatchStream(torch.utils.data.IterableDataset):
                                 unprocess=unprocess, cfa=cfa)
         self.patches_per_file = int(patches_per_file)
         self.batch_size = int(batch_size)
-        self.epoch = int(epoch)
-
-    @property
-    def needs_spawn(self) -> bool:
-        return self.maker.needs_spawn
-
-    def set_epoch(self, epoch: int) -> None:
         self.epoch = int(epoch)
 
     def __len__(self) -> int:
