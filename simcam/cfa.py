@@ -27,9 +27,8 @@ def check_pattern(cfa: str, *, where: str = "cfa") -> str:
 def shift_pattern(cfa: str, row: int, col: int) -> str:
     """Pattern seen by an image whose (0, 0) is (row, col) of the original."""
     cfa = check_pattern(cfa)
-    cell = np.array(list(cfa)).reshape(2, 2)
-    cell = np.roll(cell, shift=(-(row % 2), -(col % 2)), axis=(0, 1))
-    return "".join(cell.ravel())
+    dy, dx = row % 2, col % 2
+    return "".join(cfa[2 * ((r + dy) % 2) + (c + dx) % 2] for r in (0, 1) for c in (0, 1))
 
 
 def channel_masks(cfa: str, shape: tuple[int, int]) -> dict[str, np.ndarray]:

@@ -5,7 +5,10 @@ packed clean patch (4 x h x w float32, normalised raw, channels in
 :data:`simcam.cfa.PACK_OFFSETS` order); ``params`` is a flat dict of floats
 describing what was drawn (it ends up in the sample's ``meta``).
 ``needs_spawn`` tells data loaders that the sampler uses a library with its
-own thread pool (onnxruntime) and needs ``spawn`` worker processes.
+own thread pool (onnxruntime) and needs ``spawn`` worker processes; a sampler
+with ``writes_out = True`` also takes ``out=`` (a float32 array of the clean
+patch's shape) and writes the noisy patch there, which lets a batch be made in
+place (:meth:`simcam.dataset.torchdata.PatchMaker.make_batch`).
 """
 
 from __future__ import annotations
@@ -17,6 +20,40 @@ import numpy as np
 
 from ..cfa import pack, unpack
 from ..errors import NoiseModelError
+
+
+NORMALS = ("kernel", "auto", "numpy", "torch")
+
+
+def _check_normals(backend: str) -> None:
+    if backend not in NORMALS:
+        raise NoiseModelError(f"normals: expected one of {', '.join(map(repr, NORMALS))}, got {backend!r}")
+
+
+def hetero_gaussian(clean: np.ndarray, beta1: float, beta2: float, rng: np.random.Generator,
+                    clip: bool, backend: str, out: np.ndarray | None = None) -> np.ndarray:
+    """``clean + sqrt(beta1 clean + beta2) z`` (float32), clipped to [0, 1] if ``clip``.
+
+    ``backend="kernel"``: the fused numba kernel :func:`simcam.noise.nlf_kernel.nlf_noise`
+    (one pass, about 3x faster than numpy's normal generator alone); otherwise the normals come
+    from :func:`standard_normal` and the arithmetic from numpy. All are deterministic given
+    ``rng`` but give different bytes. ``out``: float32 C-contiguous array to write into.
+    """
+    _check_normals(backend)
+    if backend == "kernel":
+        from ..noise.nlf_kernel import nlf_noise
+
+        return nlf_noise(clean, beta1, beta2, rng, clip=(0.0, 1.0) if clip else None, out=out)
+    std = np.sqrt(np.maximum(np.float32(beta1) * clean + np.float32(beta2), 0.0, dtype=np.float32))
+    noisy = standard_normal(rng, clean.shape, backend)
+    noisy *= std
+    noisy += clean
+    if clip:
+        np.clip(noisy, 0.0, 1.0, out=noisy)
+    if out is not None:
+        out[...] = noisy
+        return out
+    return noisy
 
 
 def standard_normal(rng: np.random.Generator, shape: tuple[int, ...], backend: str = "auto") -> np.ndarray:
@@ -41,14 +78,24 @@ class GaussianNoise:
 
     sigma: tuple[float, float] = (0.24 / 255, 11.51 / 255)  # seed section 6.5's range, 8-bit units / 255
     clip: bool = False
-    normals: str = "auto"
+    normals: str = "kernel"
     needs_spawn: bool = False
 
-    def __call__(self, clean: np.ndarray, rng: np.random.Generator, info: dict | None = None):
+    writes_out = True  # __call__ takes ``out=``
+
+    def __post_init__(self):
+        _check_normals(self.normals)
+
+    def __call__(self, clean: np.ndarray, rng: np.random.Generator, info: dict | None = None, out=None):
         s = float(rng.uniform(*self.sigma))
+        if self.normals == "kernel":
+            return hetero_gaussian(clean, 0.0, s * s, rng, self.clip, "kernel", out), {"beta1": 0.0, "beta2": s * s}
         noisy = clean + np.float32(s) * standard_normal(rng, clean.shape, self.normals)
         if self.clip:
             np.clip(noisy, 0.0, 1.0, out=noisy)
+        if out is not None:
+            out[...] = noisy
+            noisy = out
         return noisy, {"beta1": 0.0, "beta2": s * s}
 
 
@@ -65,21 +112,24 @@ class NLFNoise:
         log-uniformly in its range.
     clip : bool
         Clip the noisy patch to [0, 1].
-    normals : {"auto", "numpy", "torch"}
-        Source of the standard normals: numpy's generator, or a torch CPU
-        generator seeded from it (about 2.5x faster; "auto" uses torch when
-        installed). Both are deterministic given the sample's generator but
-        give different bytes.
+    normals : {"kernel", "auto", "numpy", "torch"}
+        "kernel" (default): one fused numba pass (:mod:`simcam.noise.nlf_kernel`,
+        ziggurat normals). Otherwise the normals come from numpy's generator or a
+        torch CPU generator seeded from it ("auto" uses torch when installed) and
+        the arithmetic from numpy. All are deterministic given the sample's
+        generator but give different bytes.
     """
 
     nlfs: Sequence[tuple[float, float]] | None = None
     beta1: tuple[float, float] | None = None
     beta2: tuple[float, float] | None = None
     clip: bool = True
-    normals: str = "auto"
+    normals: str = "kernel"
     needs_spawn: bool = False
+    writes_out = True  # __call__ takes ``out=``
 
     def __post_init__(self):
+        _check_normals(self.normals)
         if self.nlfs is None and (self.beta1 is None or self.beta2 is None):
             raise NoiseModelError("NLFNoise: expected nlfs=[(beta1, beta2), ...] or beta1=(lo, hi) and beta2=(lo, hi)")
         if self.nlfs is not None:
@@ -92,15 +142,9 @@ class NLFNoise:
         b2 = float(np.exp(rng.uniform(np.log(self.beta2[0]), np.log(self.beta2[1]))))
         return b1, b2
 
-    def __call__(self, clean: np.ndarray, rng: np.random.Generator, info: dict | None = None):
+    def __call__(self, clean: np.ndarray, rng: np.random.Generator, info: dict | None = None, out=None):
         b1, b2 = self.draw(rng)
-        std = np.sqrt(np.maximum(np.float32(b1) * clean + np.float32(b2), 0.0, dtype=np.float32))
-        noisy = standard_normal(rng, clean.shape, self.normals)
-        noisy *= std
-        noisy += clean
-        if self.clip:
-            np.clip(noisy, 0.0, 1.0, out=noisy)
-        return noisy, {"beta1": b1, "beta2": b2}
+        return hetero_gaussian(clean, b1, b2, rng, self.clip, self.normals, out), {"beta1": b1, "beta2": b2}
 
 
 @dataclass
@@ -160,13 +204,14 @@ class ProfileNoise:
         return state
 
     def model_at(self, iso: float):
-        if iso not in self._models:
+        model = self._models.get(iso)
+        if model is None:  # (thread workers may race here: each gets a valid model)
             from ..profiles import load_profile
 
             if len(self._models) > 256:
                 self._models.clear()
-            self._models[iso] = load_profile(self.profile).model_for(iso, self.camera)
-        return self._models[iso]
+            model = self._models[iso] = load_profile(self.profile).model_for(iso, self.camera)
+        return model
 
     def __call__(self, clean: np.ndarray, rng: np.random.Generator, info: dict | None = None):
         from ..noise.base import NoiseCondition

@@ -26,7 +26,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from ..cfa import check_pattern, pack, shift_pattern
+from ..cfa import PACK_OFFSETS, check_pattern, pack, shift_pattern
 from ..errors import DatasetError, require_extra
 from ..frame import RawFrame
 from .unprocess import Unprocess
@@ -147,13 +147,23 @@ class PatchMaker:
         return state
 
     def source(self, k: int) -> Source:
-        if k not in self._cache:
+        src = self._cache.get(k)
+        if src is None:  # (thread workers may race here: each gets a valid source)
             if len(self._cache) > 64:
                 self._cache.clear()
-            self._cache[k] = self.sources[k].load()
-        return self._cache[k]
+            src = self._cache[k] = self.sources[k].load()
+        return src
 
     def make(self, index: int, epoch: int, source_index: int | None = None) -> dict[str, Any]:
+        p = self.patch_size
+        noisy, clean = np.empty((4, p, p), np.float32), np.empty((4, p, p), np.float32)
+        meta = self.make_into(index, epoch, noisy, clean, source_index)
+        return {"noisy": torch.from_numpy(noisy), "clean": torch.from_numpy(clean), "meta": meta}
+
+    def make_into(self, index: int, epoch: int, noisy_out: np.ndarray, clean_out: np.ndarray,
+                  source_index: int | None = None) -> dict[str, Any]:
+        """Write sample ``index`` of ``epoch`` into ``noisy_out`` / ``clean_out`` (4 x p x p float32,
+        C-contiguous) and return its meta."""
         ss = np.random.SeedSequence([self.seed, int(epoch), int(index)])
         crop_ss, noise_ss = ss.spawn(2)
         rng = np.random.default_rng(crop_ss)
@@ -175,12 +185,61 @@ class PatchMaker:
             mosaic, drawn = self.unprocess(src.data[top:top + p2, left:left + p2], rng)
             out_cfa = self.unprocess.cfa
             unproc = {"red_gain": drawn["red_gain"], "blue_gain": drawn["blue_gain"], "rgb_gain": drawn["rgb_gain"]}
-        clean = np.ascontiguousarray(pack(np.asarray(mosaic, dtype=np.float32)))
-        noisy, params = self.noise(clean, np.random.default_rng(noise_ss), {"cfa": out_cfa})
-        meta = {"index": int(index), "epoch": int(epoch), "source": k, "top": top, "left": left,
+        for c, (dy, dx) in enumerate(PACK_OFFSETS):
+            clean_out[c] = mosaic[dy::2, dx::2]
+        noise_rng = np.random.default_rng(noise_ss)
+        info = {"cfa": out_cfa}
+        if getattr(self.noise, "writes_out", False):
+            _, params = self.noise(clean_out, noise_rng, info, out=noisy_out)
+        else:
+            noisy, params = self.noise(clean_out, noise_rng, info)
+            noisy_out[...] = noisy
+        return {"index": int(index), "epoch": int(epoch), "source": k, "top": top, "left": left,
                 "cfa": out_cfa, **{k2: float(v) for k2, v in params.items()}, **unproc}
-        return {"noisy": torch.from_numpy(np.ascontiguousarray(noisy, dtype=np.float32)),
-                "clean": torch.from_numpy(clean), "meta": meta}
+
+    def make_batch(self, indices: Sequence[int], epoch: int,
+                   source_indices: Sequence[int] | None = None) -> "PatchBatch":
+        """The samples ``indices`` of ``epoch`` made straight into one stacked pair of tensors
+        (in shared memory inside a DataLoader worker, so the batch is not copied again)."""
+        noisy, clean = _batch_tensor(len(indices), self.patch_size), _batch_tensor(len(indices), self.patch_size)
+        nn, cn = noisy.numpy(), clean.numpy()
+        metas = [self.make_into(i, epoch, nn[j], cn[j], None if source_indices is None else source_indices[j])
+                 for j, i in enumerate(indices)]
+        return PatchBatch({"noisy": noisy[j], "clean": clean[j], "meta": m} for j, m in enumerate(metas)).stacked(
+            noisy, clean, metas)
+
+
+def _batch_tensor(n: int, p: int):
+    """An uninitialised n x 4 x p x p float32 tensor, allocated in shared memory inside a
+    DataLoader worker (as ``default_collate`` does, so the batch crosses to the main process
+    without a copy)."""
+    if torch.utils.data.get_worker_info() is None:
+        return torch.empty((n, 4, p, p), dtype=torch.float32)
+    proto = torch.empty(0, dtype=torch.float32)
+    storage = proto._typed_storage()._new_shared(n * 4 * p * p)
+    return proto.new(storage).resize_(n, 4, p, p)
+
+
+class PatchBatch(list):
+    """The samples of one batch (a plain list of sample dicts, so ``default_collate`` works on it)
+    with the batch already stacked: :func:`collate_patches` returns that without copying."""
+
+    collated: dict | None = None
+
+    def stacked(self, noisy, clean, metas) -> "PatchBatch":
+        from torch.utils.data import default_collate
+
+        self.collated = {"noisy": noisy, "clean": clean, "meta": default_collate(metas)}
+        return self
+
+
+def collate_patches(batch):
+    """``default_collate``, except for a :class:`PatchBatch` whose stacked tensors are returned as they are."""
+    if isinstance(batch, PatchBatch) and batch.collated is not None:
+        return batch.collated
+    from torch.utils.data import default_collate
+
+    return default_collate(batch)
 
 
 # ------------------------------------------------------------------------------- datasets
@@ -235,6 +294,14 @@ class NoisyPatchDataset(_EpochedPatches, torch.utils.data.Dataset):
         if not 0 <= index < self.length:
             raise IndexError(index)
         return self.maker.make(index, self.epoch)
+
+    def __getitems__(self, indices: list[int]) -> "PatchBatch":
+        """A batch for the DataLoader's fetcher: made straight into stacked tensors (same values
+        as ``[self[i] for i in indices]``)."""
+        for i in indices:
+            if not 0 <= i < self.length:
+                raise IndexError(i)
+        return self.maker.make_batch(indices, self.epoch)
 
 
 class PairPatchDataset(torch.utils.data.Dataset):
@@ -326,19 +393,38 @@ def worker_init(worker_id: int) -> None:
 
 
 def make_loader(dataset, *, batch_size: int, num_workers: int = 0, shuffle: bool = False,
-                generator_seed: int = 0, **kwargs):
+                generator_seed: int = 0, workers: str = "process", **kwargs):
     """A ``DataLoader`` with the right start method (``spawn`` where rawpy/onnxruntime are used),
-    one thread per worker, and (for ``shuffle``) a seeded sampler."""
+    one thread per worker, whole batches made in place (:func:`collate_patches`), and (for
+    ``shuffle``) a seeded sampler.
+
+    ``workers="thread"`` makes the batches with ``num_workers`` threads of this process instead
+    (:class:`~simcam.dataset.thread_loader.ThreadLoader`: same batches, no shared-memory
+    hand-over; map-style datasets; only ``collate_fn`` and ``drop_last`` among the
+    ``DataLoader`` options).
+    """
+    if workers not in ("process", "thread"):
+        raise DatasetError(f"make_loader: workers={workers!r}; expected 'process' or 'thread'")
     if isinstance(dataset, NoisyPatchStream) and batch_size != dataset.batch_size:
         raise DatasetError(f"make_loader: batch_size {batch_size} differs from the stream's batch_size "
                            f"{dataset.batch_size}; expected equal (worker sharding is by batch)")
-    if num_workers > 0:
-        kwargs.setdefault("worker_init_fn", worker_init)
-        if getattr(dataset, "needs_spawn", False):
-            kwargs.setdefault("multiprocessing_context", "spawn")
+    kwargs.setdefault("collate_fn", collate_patches)
     gen = None
     if shuffle:
         gen = torch.Generator()
         gen.manual_seed(int(generator_seed) + int(getattr(dataset, "epoch", 0)))
+    if workers == "thread" and num_workers > 0:
+        from .thread_loader import ThreadLoader
+
+        extra = sorted(set(kwargs) - {"collate_fn", "drop_last"})
+        if extra:
+            raise DatasetError(f"make_loader: workers='thread' does not take {', '.join(extra)}")
+        sampler = torch.utils.data.RandomSampler(dataset, generator=gen) if shuffle else None
+        return ThreadLoader(dataset, batch_size=batch_size, num_workers=num_workers, sampler=sampler,
+                            generator=gen, **kwargs)
+    if num_workers > 0:
+        kwargs.setdefault("worker_init_fn", worker_init)
+        if getattr(dataset, "needs_spawn", False):
+            kwargs.setdefault("multiprocessing_context", "spawn")
     return torch.utils.data.DataLoader(dataset, batch_size=batch_size, num_workers=num_workers,
                                        shuffle=shuffle, generator=gen, **kwargs)

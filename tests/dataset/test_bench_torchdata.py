@@ -43,6 +43,39 @@ def test_map_dataset_same_tensors_with_0_and_2_workers_no_duplicates_epochs_diff
     assert torch.equal(ds2[5]["noisy"], ds[5]["noisy"])
 
 
+def test_batched_fetch_equals_per_sample_fetch_and_plain_dataloader():
+    # make_loader fetches whole batches (__getitems__ writes them in place, collate_patches passes
+    # them through); a plain DataLoader stacks the per-sample views; both equal [ds[i] for i in ...]
+    ds = NoisyPatchDataset(_clean_sources(), NLF, length=8, patch_size=8, seed=5)
+    ours = _batches(make_loader(ds, batch_size=4, num_workers=0))
+    plain = _batches(torch.utils.data.DataLoader(ds, batch_size=4, num_workers=0))
+    single = [ds[i] for i in range(8)]
+    for k, ((n0, c0, i0), (n1, c1, i1)) in enumerate(zip(ours, plain)):
+        assert torch.equal(n0, n1) and torch.equal(c0, c1) and torch.equal(i0, i1)
+        assert torch.equal(n0, torch.stack([s["noisy"] for s in single[4 * k:4 * k + 4]]))
+
+
+def test_thread_workers_give_the_batches_of_process_workers():
+    ds = NoisyPatchDataset(_clean_sources(), NLF, length=12, patch_size=8, seed=3)
+    for shuffle in (False, True):
+        b0 = _batches(make_loader(ds, batch_size=4, num_workers=0, shuffle=shuffle, generator_seed=9))
+        bt = _batches(make_loader(ds, batch_size=4, num_workers=2, shuffle=shuffle, generator_seed=9, workers="thread"))
+        assert len(b0) == len(bt) == 3
+        for (n0, c0, i0), (n1, c1, i1) in zip(b0, bt):
+            assert torch.equal(n0, n1) and torch.equal(c0, c1) and torch.equal(i0, i1)
+    loader = make_loader(ds, batch_size=5, num_workers=2, workers="thread", drop_last=True)
+    assert len(loader) == 2 and [b["noisy"].shape[0] for b in loader] == [5, 5]
+    for b in loader:  # stopping early leaves no thread behind
+        break
+    st = NoisyPatchStream(_clean_sources(2), NLF, patches_per_file=2, batch_size=2, patch_size=8)
+    with pytest.raises(DatasetError, match="iterable dataset"):
+        make_loader(st, batch_size=2, num_workers=2, workers="thread")
+    with pytest.raises(DatasetError, match="pin_memory"):
+        make_loader(ds, batch_size=2, num_workers=2, workers="thread", pin_memory=True)
+    with pytest.raises(DatasetError, match="'process' or 'thread'"):
+        make_loader(ds, batch_size=2, workers="threads")
+
+
 def test_stream_same_batches_with_0_and_2_workers():
     st = NoisyPatchStream(_clean_sources(5), NLF, patches_per_file=3, batch_size=4, patch_size=8, seed=1)
     b0 = _batches(make_loader(st, batch_size=4, num_workers=0))

@@ -1,0 +1,105 @@
+"""Fused heteroscedastic Gaussian noise kernel: ``clip(x + sqrt(max(beta1 x + beta2, 0)) z)`` in one pass.
+
+The NLF noise of the seed (eq. 5.2; clipped, eq. 5.3) for on-the-fly training
+data, where drawing normals with numpy and then combining them in four array
+passes costs more than the training step needs. One compiled loop reads the
+clean value, draws ``z ~ N(0, 1)`` with the ziggurat of
+:mod:`simcam.noise.poisson_table` (Marsaglia & Tsang 2000, 256 layers, exact
+tail) from counter-based SplitMix64 words, and writes the clipped noisy value:
+no temporaries, one read and one write per pixel.
+
+Randomness: element ``i`` takes the word at counter ``seed0 + (i + 1) gamma``
+for its first ziggurat try (the words of a pass are generated together, which
+vectorises); the rare rejections (about 1.2 %) take words in order from a
+second SplitMix64 stream at ``seed1``. Both seeds come from the caller's numpy
+Generator, so the output depends only on that generator and the inputs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .poisson_table import _GAMMA, _M8, _M52, _U1, _U8, ZIG_F, ZIG_K, ZIG_R, ZIG_W, _mix, zig_normal
+
+_U9 = np.uint64(9)
+_ALL_ACCEPTED = np.uint64(0x0101010101010101)
+
+#: elements whose first words are generated together (a multiple of 8).
+PASS = 1024
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _nlf_kernel(clean, beta1, beta2, lo, hi, out, seed, zk, zw, zf, zr):
+    c0 = seed[0]
+    ctr = seed[1]
+    n = clean.size
+    words = np.empty(PASS, np.uint64)
+    zb = np.empty(PASS, np.float32)
+    first = np.empty(PASS, np.uint8)
+    first8 = first.view(np.uint64)  # 8 flags per word: skip runs of accepted first tries
+    for p0 in range(0, n, PASS):
+        m = min(PASS, n - p0)
+        base = c0 + np.uint64(p0) * _GAMMA
+        for q in range(m):  # counter-based words: vectorises
+            words[q] = _mix(base + np.uint64(q + 1) * _GAMMA)
+        # the ziggurat's first try for every element (branch-free, vectorises) ...
+        for ii in range(m):
+            w = words[ii]
+            idx = w & _M8
+            rabs = (w >> _U9) & _M52
+            sign = 1.0 - 2.0 * np.float64((w >> _U8) & _U1)
+            zb[ii] = np.float32(np.float64(np.int64(rabs)) * zw[idx] * sign)
+            first[ii] = np.uint8(rabs < zk[idx])
+        for ii in range(m, PASS):
+            first[ii] = 1
+        # ... the rare rejected ones (about 1.2 %) redone in full from the same word, as zig_normal does
+        for g in range(PASS // 8):
+            if first8[g] != _ALL_ACCEPTED:
+                for ii in range(8 * g, 8 * g + 8):
+                    if first[ii] == 0:
+                        z, ctr = zig_normal(words[ii], ctr, zk, zw, zf, zr)
+                        zb[ii] = np.float32(z)
+        for ii in range(m):
+            x = clean[p0 + ii]
+            v = beta1 * x + beta2
+            sd = np.float32(np.sqrt(max(v, np.float32(0.0))))
+            y = x + sd * zb[ii]
+            out[p0 + ii] = min(max(y, lo), hi)
+
+
+def nlf_noise(clean: np.ndarray, beta1: float, beta2: float, rng: np.random.Generator, *,
+              clip: tuple[float, float] | None = (0.0, 1.0), out: np.ndarray | None = None) -> np.ndarray:
+    """Noisy copy of ``clean`` with variance ``beta1 * clean + beta2`` (seed eq. 5.2), clipped (eq. 5.3).
+
+    Parameters
+    ----------
+    clean : ndarray
+        Clean signal, normalised raw (float32; any shape, made contiguous).
+    beta1 : float
+        Signal-dependent variance factor (>= 0), normalised raw units.
+    beta2 : float
+        Signal-independent variance (>= 0), normalised raw units squared.
+    rng : numpy Generator
+        Source of the kernel's two 64-bit seeds (two raw words are consumed).
+    clip : (lo, hi) or None
+        Clip range of the noisy values (default ``(0, 1)``); None keeps them unclipped.
+    out : ndarray, optional
+        float32 C-contiguous output of ``clean``'s size (may be ``clean`` itself).
+
+    Returns
+    -------
+    ndarray
+        float32 noisy values, ``clean``'s shape.
+    """
+    c = np.ascontiguousarray(clean, dtype=np.float32)
+    if out is None:
+        out = np.empty(c.shape, np.float32)
+    elif out.dtype != np.float32 or not out.flags.c_contiguous or out.size != c.size:
+        raise ValueError(f"nlf_noise: out must be C-contiguous float32 of {c.size} values, got "
+                         f"{out.dtype} {out.shape}")
+    lo, hi = (-np.inf, np.inf) if clip is None else clip
+    seed = rng.bit_generator.random_raw(2).astype(np.uint64)
+    _nlf_kernel(c.reshape(-1), np.float32(beta1), np.float32(beta2), np.float32(lo), np.float32(hi),
+                out.reshape(-1), seed, ZIG_K, ZIG_W, ZIG_F, ZIG_R)
+    return out
