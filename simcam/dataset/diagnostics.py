@@ -13,14 +13,17 @@ diagnostic              effect              statistic
 ptc_curvature           nonlinearity        quadratic / linear coefficient of variance vs mean
 plane_gain_spread       channel_gain        std / mean of the per-CFA-plane photon-transfer slopes
 row_mean_excess         row_noise           var(row means of temporal residual) / (pixel var / W)
-row_spectrum_peak       periodic_pattern    max / median of the (per-frame whitened) periodogram of row means
+row_spectrum_peak       periodic_pattern    max / median of the periodogram of row means
+                                            (per frame / its median; mean over frames / its
+                                            9-bin running median)
 col_spectrum_peak       periodic_pattern    same along columns
 col_temporal_excess     (none)              var(column means of temporal residual) / (pixel var / H)
 col_fpn_excess          column_fpn          cov(column means of even- and odd-frame dark mean maps) /
                                             (map var / H)
 dsnu_excess             dsnu                robust var of the dark mean map (rows/cols removed) /
                                             (temporal var / n)
-hot_pixel_tail          hot_pixels          fraction of dark-map pixels > 6 robust sigma
+hot_pixel_tail          hot_pixels          fraction of pixels whose dark temporal median is
+                                            > 6 robust sigma (persistent outliers)
 prnu_excess             prnu                (flat map var - dark map var) / signal^2 (pixel part)
 black_offset            black_level_offset  median of dark mean map - declared black (DN)
 frame_mean_jitter       frame_flicker       var of flat frame means / signal^2
@@ -40,6 +43,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.ndimage import median_filter
 from scipy import stats as sst
 
 PLANE_OFFSETS = ((0, 0), (0, 1), (1, 0), (1, 1))
@@ -261,9 +265,15 @@ def periodogram(d: CaptureData, axis: int) -> np.ndarray | None:
     return np.concatenate(ps).mean(0)
 
 
+#: running-median width (bins) of the broadband spectral shape divided out of the periodogram.
+SPECTRUM_SMOOTH_BINS = 9
+
+
 def whitened_periodogram(d: CaptureData, axis: int) -> np.ndarray | None:
     """Mean over frames of each frame's periodogram divided by its own median (so dark frames,
-    where a weak pattern stands out, are not drowned by the shot noise of flats)."""
+    where a weak pattern stands out, are not drowned by the shot noise of flats), then divided by
+    its running median over ``SPECTRUM_SMOOTH_BINS`` bins: a broadband colour (in-plane
+    crosstalk, a low-pass row noise) is divided out and only narrow lines stand out."""
     key = ("wp", axis)
     if key not in d.cache:
         lm = _line_means("all", axis, d)
@@ -272,7 +282,9 @@ def whitened_periodogram(d: CaptureData, axis: int) -> np.ndarray | None:
         else:
             ps = [np.abs(np.fft.rfft(m - m.mean(axis=1, keepdims=True), axis=1)) ** 2 for m in lm]
             ps = [p / np.median(p[:, 1:], axis=1, keepdims=True) for p in ps]
-            d.cache[key] = np.concatenate(ps).mean(0)
+            mean = np.concatenate(ps).mean(0)
+            mean[1:] /= median_filter(mean[1:], size=SPECTRUM_SMOOTH_BINS, mode="nearest")
+            d.cache[key] = mean
     return d.cache[key]
 
 
@@ -329,12 +341,23 @@ def dsnu_excess(d: CaptureData):
     return float(robust_sigma(r) ** 2 / (vt / n))
 
 
+def hot_pixel_mask(d: CaptureData) -> np.ndarray | None:
+    """Pixels whose *temporal median* over the dark frames is beyond 6 robust sigma (profiles
+    removed): a hot pixel is high in every frame, a heavy-tailed read-noise outlier in one, and
+    the median of a few frames is not moved by one outlier."""
+    if "hotmask" not in d.cache:
+        if not d.darks:
+            d.cache["hotmask"] = None
+        else:
+            med = np.median(np.concatenate(d.darks).astype(np.float64), axis=0)
+            r = remove_profiles(med)
+            d.cache["hotmask"] = r > 6 * robust_sigma(r)
+    return d.cache["hotmask"]
+
+
 def hot_pixel_tail(d: CaptureData):
-    dm = d.dark_map()
-    if dm is None:
-        return None
-    r = remove_profiles(dm[0])
-    return float(np.mean(r > 6 * robust_sigma(r)))
+    mask = hot_pixel_mask(d)
+    return None if mask is None else float(np.mean(mask))
 
 
 def prnu_excess(d: CaptureData):
