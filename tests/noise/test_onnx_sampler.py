@@ -32,7 +32,7 @@ rng = np.random.default_rng(0)
 clean = rng.random((1, 4, 8, 8), dtype=np.float32)
 x = s.sample(clean, iso=300.0, camera='B', rng=rng)
 ll = s.log_prob(x, clean=clean, iso=300.0, camera='B')
-import simcam.cli, simcam.noise.flow, simcam.noise.flow.data, simcam.noise.flow.metrics  # torch-free modules
+import simcam.cli, simcam.noise.flow, simcam.noise.flow.data, simcam.noise.metrics  # torch-free modules
 assert 'torch' not in [m for m in sys.modules if sys.modules[m] is not None]
 from simcam.errors import OptionalDependencyError
 try:

@@ -2,7 +2,7 @@
 
 Adam, lr 1e-3, betas (0.9, 0.999) as in the seed; 32x32 packed patches; a
 train/test split with every (camera, ISO) in both; per-epoch test NLL per
-dimension (nats) and marginal KL (:mod:`simcam.noise.flow.metrics`) written to
+dimension (nats) and marginal KL (:func:`simcam.noise.metrics.marginal_kl`) written to
 ``metrics.csv`` and ``metrics.png``; checkpoints ``last.pt`` (with optimizer state,
 for ``resume``) and ``best.pt`` (lowest test NLL). Batch order of epoch e comes from
 ``SeedSequence([seed, e])``.
@@ -26,7 +26,7 @@ import numpy as np
 
 from ...errors import DatasetError, NoiseModelError, require_extra
 from .data import split_by_condition
-from .metrics import KL_BINNING, marginal_kl
+from ..metrics import KL_BINNING, marginal_kl
 from .model import FlowConfig, NoiseFlow
 
 torch = require_extra("torch", "torch")
@@ -110,7 +110,7 @@ def evaluate(flow: NoiseFlow, ps: dict, *, batch: int = 256, seed: int = 0, temp
             nll -= float(flow.log_prob(noise, clean=clean, iso=iso, camera=cam).sum())
             z = temperature * torch.randn(noise.shape, generator=g)
             fake = flow.sample(z, clean=clean, iso=iso, camera=cam)
-            kls.append(marginal_kl(noise.numpy(), fake.numpy()))
+            kls.append(marginal_kl(noise.numpy(), fake.numpy()).kl)
     return nll / (n * d), float(np.mean(kls))
 
 
