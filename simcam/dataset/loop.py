@@ -13,9 +13,12 @@ Per ISO group of a capture set:
    diagnostics.
 4. The most significant diagnostic (with the precedence rules of
    ``diagnostics.PRECEDENCE``) names an effect; its parameters are fitted; the
-   candidate model is simulated again. On held-out frames: marginal KL (Noise
-   Flow binning), NLL/dim of the model's Gaussian marginal where it has one,
-   and the diagnostic's own standardised discrepancy, before and after.
+   candidate model is simulated again. On held-out frames: the pixel marginal
+   KL (Noise Flow binning, Jeffreys-smoothed model histogram) with its
+   sampling floor and excess, the structured marginal KL of aggregated noise
+   (:mod:`simcam.dataset.loop_kl`), NLL/dim of the model's Gaussian marginal
+   where it has one, and the diagnostic's own standardised discrepancy,
+   before and after. The structured KL is reported, not used in decisions.
 5. The effect is kept if the held-out discrepancy of its diagnostic shrinks and
    the held-out KL does not grow (beyond ``kl_tolerance`` relative plus twice
    the KL's sampling floor, :func:`kl_sampling_floor`); otherwise the
