@@ -21,7 +21,8 @@ col_fpn_excess          column_fpn          cov(column means of even- and odd-fr
 dsnu_excess             dsnu                robust var of the dark mean map (rows/cols removed) /
                                             (temporal var / n)
 hot_pixel_tail          hot_pixels          fraction of pixels > 6 robust sigma in both half-dark maps
-prnu_excess             prnu                (flat map var - dark map var) / signal^2 (pixel part)
+prnu_excess             prnu                per plane (even/odd flat-map covariance - same of the
+                                            darks) / signal^2, mean over planes
 black_offset            black_level_offset  median of dark mean map - declared black (DN)
 frame_mean_jitter       frame_flicker       var of flat frame means / signal^2
 dark_tail_mass          heavy_tail_read     fraction of dark residuals beyond 4 IQR-sigma
