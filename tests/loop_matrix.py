@@ -65,5 +65,7 @@ def matrix(cases=CASES):
         rows.append({"hidden": case, "named": tuple(r.model.effects),
                      "unexplained": tuple(u["diagnostic"] for u in r.unexplained),
                      "kl_base": r.heldout_base["kl"], "kl_final": r.heldout_final["kl"],
+                     "kl_structured_base": r.heldout_base["kl_structured"],
+                     "kl_structured_final": r.heldout_final["kl_structured"],
                      "ok": set(case) == set(r.model.effects) and not r.unexplained})
     return rows

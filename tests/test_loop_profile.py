@@ -74,3 +74,17 @@ def test_noise_stage_from_the_profile_draws_the_fitted_noise():
     # in-plane lag-1 correlation of the read noise 2a / (1 + 2a^2), the response slope ~1 at black;
     # SE ~ 1.5 / sqrt(16 * 1024) = 0.012 -> 0.05
     assert np.mean(p[:, :, 1:] * p[:, :, :-1]) / np.mean(p * p) == pytest.approx(2 * a / (1 + 2 * a * a), abs=0.05)
+
+
+def test_hot_pixel_log_normal_round_trip():
+    # the loop's log-normal (log_mean, log_sigma in DN) -> hot_offset = its mean / (white - black) and
+    # hot_log_sigma, and back (exact inverse)
+    m = _model()
+    m.effects["hot_pixels"] = {"fraction": 0.004, "log_mean": 3.9, "log_sigma": 0.75}
+    entry, notes = noise_entry(m)
+    hp = next(e for e in entry["effects"] if e["type"] == "hot_pixels")
+    assert hp["hot_offset"] == pytest.approx(np.exp(3.9 + 0.75 ** 2 / 2) / 959.0)
+    assert hp["hot_log_sigma"] == 0.75 and not any("hot" in n for n in notes)
+    back = models_from_noise_profile(noise_profile([_Res(m)], _Cap()), "profile.yaml")[800]
+    assert back.effects["hot_pixels"]["log_mean"] == pytest.approx(3.9)
+    assert back.effects["hot_pixels"]["log_sigma"] == pytest.approx(0.75)

@@ -33,7 +33,8 @@ def loop(
     for g in doc["isos"]:
         un = ", ".join(u["diagnostic"] for u in g["unexplained"]) or "none"
         typer.echo(f"ISO {g['iso']}: effects {', '.join(g['effects']) or 'none'}; unexplained {un}; "
-                   f"held-out KL {g['heldout']['kl_base']:.3g} -> {g['heldout']['kl_final']:.3g}")
+                   f"held-out KL {g['heldout']['kl_base']:.3g} -> {g['heldout']['kl_final']:.3g}, "
+                   f"structured KL {g['heldout']['kl_structured_base']:.3g} -> {g['heldout']['kl_structured_final']:.3g}")
     if doc.get("emva"):
         e = doc["emva"]
         typer.echo(f"EMVA 1288: K = {e['K_dn_per_e']:.4f} DN/e-, sigma_d = {e['sigma_dark_e']:.2f} e-")

@@ -128,6 +128,18 @@ def fit_dsnu(d, model, ctx):
 
 
 def fit_hot_pixels(d, model, ctx):
+    """Hot pixels: pixels whose dark temporal median (row/column profiles removed) is above 6
+    robust sigma (:func:`~simcam.dataset.diagnostics.hot_pixel_mask`); ``fraction`` of pixels,
+    and a log-normal of their offsets in the dark temporal-mean map (DN) by the moments of the
+    log offsets (``log_mean``, ``log_sigma``; written to the noise stage as ``hot_offset`` = the
+    mean exp(log_mean + log_sigma^2 / 2) and ``hot_log_sigma``).
+
+    A log-normal is an approximation of whatever law the offsets follow (dark-current outliers
+    are often closer to exponential): it is fitted to the *detected* part, offsets above the
+    threshold (~6 x the map's noise), which is all the data says about them; smaller offsets are
+    indistinguishable from DSNU. On exponential offsets of mean 60 DN above a 9-DN threshold it
+    matches the detected offsets' quartiles within ~10 % and their mean within ~2 %.
+    """
     m, _vt, _n = d.dark_map()
     r = dg.remove_profiles(m)
     hot = dg.hot_pixel_mask(d)  # persistent outliers (temporal median), offsets from the mean map

@@ -13,9 +13,12 @@ Per ISO group of a capture set:
    diagnostics.
 4. The most significant diagnostic (with the precedence rules of
    ``diagnostics.PRECEDENCE``) names an effect; its parameters are fitted; the
-   candidate model is simulated again. On held-out frames: marginal KL (Noise
-   Flow binning), NLL/dim of the model's Gaussian marginal where it has one,
-   and the diagnostic's own standardised discrepancy, before and after.
+   candidate model is simulated again. On held-out frames: the pixel marginal
+   KL (Noise Flow binning, Jeffreys-smoothed model histogram) with its
+   sampling floor and excess, the structured marginal KL of aggregated noise
+   (:mod:`simcam.dataset.loop_kl`), NLL/dim of the model's Gaussian marginal
+   where it has one, and the diagnostic's own standardised discrepancy,
+   before and after. The structured KL is reported, not used in decisions.
 5. The effect is kept if the held-out discrepancy of its diagnostic shrinks and
    the held-out KL does not grow (beyond ``kl_tolerance`` relative plus twice
    the KL's sampling floor, :func:`kl_sampling_floor`); otherwise the
@@ -37,11 +40,13 @@ from ..errors import DatasetError
 from . import diagnostics as dg
 from .capture import CaptureSet, Sequence
 from .effect_fit import base_fit, ctx_like, fit_effect
+from .loop_kl import STRUCTURED_BINNING, kl_counts, kl_floor, structured_kl  # noqa: F401
 from .loop_model import LoopModel, SimSpec, marginal_variance, simulate_capture, site_map
 
 #: Noise Flow marginal-KL binning (DESIGN.md sec. 5), normalised raw units.
 KL_EDGES = np.concatenate([[-1000.0], np.linspace(-0.1, 0.1, 65), [1000.0]])
-KL_BINNING = "edges [-1000] + linspace(-0.1, 0.1, 65) + [1000] on normalised raw noise; forward KL D(real||model) over bins where both are non-empty"
+KL_BINNING = ("edges [-1000] + linspace(-0.1, 0.1, 65) + [1000] on normalised raw noise; forward KL D(real||model) "
+              "over the bins the data occupies, model counts + 1/2 per bin (Jeffreys)")
 
 
 @dataclass
@@ -138,34 +143,38 @@ def _capture(group: Group, part, sims, specs) -> dg.CaptureData:
     return ctx_like(group.fit_data if part is group.fit else group.held_data, sims, specs)
 
 
-def noise_values(part, frames_list, specs, model: LoopModel) -> np.ndarray:
-    """Signed noise on normalised raw: frame minus the sequence's clean level under the model
-    (black + black offset + signal of its :class:`SimSpec`), the same reference for data and
-    simulations (so discrete ADC codes fall on the same lattice in both)."""
+def noise_frames(part, frames_list, specs, model: LoopModel) -> list[np.ndarray]:
+    """Signed noise on normalised raw, per sequence (n, H, W): frame minus the sequence's clean level
+    under the model (black + black offset + signal of its :class:`SimSpec`), the same reference for data
+    and simulations (so discrete ADC codes fall on the same lattice in both)."""
     fs = model.full_scale_dn
     offs = np.asarray(model.effects.get("black_level_offset", {}).get("offset_dn", [0.0] * 4))
     out = []
     for fr, sp in zip(frames_list, specs):
         ref = sp.signal_dn + site_map(model.black_dn.ravel() + offs, sp.signal_dn.shape)
-        out.append((fr.astype(np.float64) - ref).ravel() / fs)
-    return np.concatenate(out)
+        out.append((fr.astype(np.float64) - ref) / fs)
+    return out
+
+
+def noise_values(part, frames_list, specs, model: LoopModel) -> np.ndarray:
+    """:func:`noise_frames` of all sequences, flattened into one array."""
+    return np.concatenate([x.ravel() for x in noise_frames(part, frames_list, specs, model)])
 
 
 def marginal_kl(real: np.ndarray, model: np.ndarray) -> float:
-    """Forward KL D(real || model) with the Noise Flow binning (:data:`KL_EDGES`)."""
-    p = np.histogram(real, KL_EDGES)[0].astype(np.float64)
-    q = np.histogram(model, KL_EDGES)[0].astype(np.float64)
-    p /= p.sum()
-    q /= q.sum()
-    both = (p > 0) & (q > 0)
-    return float(np.sum(p[both] * np.log(p[both] / q[both])))
+    """Forward KL D(real || model) with the Noise Flow binning (:data:`KL_EDGES`), the model's histogram
+    smoothed by half a count per bin (:func:`simcam.dataset.loop_kl.kl_counts`), so data in bins the
+    simulation leaves empty (a hot-pixel tail) count."""
+    return kl_counts(np.histogram(real, KL_EDGES)[0], np.histogram(model, KL_EDGES)[0])
 
 
 def kl_sampling_floor(real: np.ndarray, model: np.ndarray) -> float:
-    """Expected plug-in KL between two samples of the same law (Miller-Madow bias,
-    (B - 1) / 2N per sample with B occupied bins): differences below it are noise."""
-    b = int(np.count_nonzero(np.histogram(real, KL_EDGES)[0]))
-    return (b - 1) / (2 * real.size) + (b - 1) / (2 * model.size)
+    """Expected :func:`marginal_kl` between two samples of the same law with these sizes (exact binomial
+    expectation of the estimator, :func:`simcam.dataset.loop_kl.kl_floor`, on the pooled histogram;
+    Miller-Madow (B - 1) / 2N + (B - 1) / 2M to second order): differences below it are noise."""
+    n = np.histogram(real, KL_EDGES)[0]
+    m = np.histogram(model, KL_EDGES)[0]
+    return kl_floor(n + m, real.size, model.size)
 
 
 def nll_per_dim(part, specs, model: LoopModel) -> float | None:
@@ -182,6 +191,14 @@ def nll_per_dim(part, specs, model: LoopModel) -> float | None:
         tot += float(np.sum(0.5 * np.log(2 * np.pi * vn) + x * x / (2 * vn)))
         n += x.size
     return tot / n
+
+
+HELDOUT_KEYS = ("kl", "nll", "kl_floor", "kl_excess", "kl_structured", "structured")
+
+
+def _summary(held: dict) -> dict:
+    """The held-out numbers kept in a :class:`GroupResult` (no sample arrays)."""
+    return {k: held[k] for k in HELDOUT_KEYS}
 
 
 def _null_parameters(effect: str, p: dict) -> bool:
@@ -228,16 +245,22 @@ class Loop:
 
     def heldout(self, model: LoopModel, tag: int, diagnostics=()) -> dict:
         specs = self.g.specs(model, self.g.held)
-        real = noise_values(self.g.held, [f for _, f, _ in self.g.held], specs, model)
-        sim_noise, sim_stats = [], []
+        real_f = noise_frames(self.g.held, [f for _, f, _ in self.g.held], specs, model)
+        real = np.concatenate([x.ravel() for x in real_f])
+        sim_noise, sim_frames, sim_stats = [], [], []
         for r in range(self.cfg.heldout_replicates):
             sims = simulate_capture(model, specs, self._rng(2, tag, r))
-            sim_noise.append(noise_values(self.g.held, sims, specs, model))
+            nf = noise_frames(self.g.held, sims, specs, model)
+            sim_frames.append(nf)
+            sim_noise.append(np.concatenate([x.ravel() for x in nf]))
             if diagnostics:
                 sim_stats.append(dg.compute_all(_capture(self.g, self.g.held, sims, specs), diagnostics))
         model_noise = np.concatenate(sim_noise)
-        out = {"kl": marginal_kl(real, model_noise), "nll": nll_per_dim(self.g.held, specs, model),
-               "kl_floor": kl_sampling_floor(real, model_noise),
+        kl = marginal_kl(real, model_noise)
+        floor = kl_sampling_floor(real, model_noise)
+        st = structured_kl(real_f, [sp.fixed_in_clean for sp in specs], sim_frames)
+        out = {"kl": kl, "nll": nll_per_dim(self.g.held, specs, model), "kl_floor": floor,
+               "kl_excess": max(kl - floor, 0.0), "kl_structured": st["kl"], "structured": st["families"],
                "real_noise": real, "model_noise": model_noise[: real.size * 2]}
         for name in diagnostics:
             vals = [s[name] for s in sim_stats]
@@ -258,7 +281,7 @@ class Loop:
         rejected: set[str] = set()  # effect did not help; retried once the model changes
         unmodelled: set[str] = set()  # significant, and no effect of the vocabulary explains them
         held_before = self.heldout(model, tag, tuple(self.applicable))
-        res.heldout_base = {"kl": held_before["kl"], "nll": held_before["nll"], "kl_floor": held_before["kl_floor"]}
+        res.heldout_base = _summary(held_before)
         res.plots["hist_base"] = (held_before["real_noise"], held_before["model_noise"])
         for _it in range(cfg.max_iterations):
             sig = [d for d in discs if d.significant and d.name not in excluded | rejected]
@@ -309,6 +332,11 @@ class Loop:
                 "diagnostic": chosen.name, "discrepancy_before": chosen.z, "discrepancy_after": after.z,
                 "p_before": chosen.p, "p_after": after.p,
                 "heldout": {"kl_before": held_before["kl"], "kl_after": held_after["kl"],
+                            "kl_excess_before": held_before["kl_excess"], "kl_excess_after": held_after["kl_excess"],
+                            "kl_structured_before": held_before["kl_structured"],
+                            "kl_structured_after": held_after["kl_structured"],
+                            "structured_before": held_before["structured"],
+                            "structured_after": held_after["structured"],
                             "nll_before": held_before["nll"], "nll_after": held_after["nll"],
                             "discrepancy_before": None if hb is None else hb.z,
                             "discrepancy_after": None if ha is None else ha.z},
@@ -328,7 +356,7 @@ class Loop:
                 res.unexplained.append({"diagnostic": chosen.name, "discrepancy": chosen.z, "reason": why})
         res.model = model
         res.final = discs
-        res.heldout_final = {"kl": held_before["kl"], "nll": held_before["nll"], "kl_floor": held_before["kl_floor"]}
+        res.heldout_final = _summary(held_before)
         listed = {u["diagnostic"] for u in res.unexplained}
         for d in discs:
             if d.significant and d.name not in listed:

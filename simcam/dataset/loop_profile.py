@@ -14,7 +14,9 @@ noise stage given ``profile.yaml`` draws the noise the loop fitted. Conversions:
   ``scale = read / sqrt(var(TukeyLambda(lam)))``.
 * ``spatial_correlation``: the loop's ``a`` is the noise stage's ``coefficient`` (same kernel).
 * ``nonlinearity``: ``strength = -c`` (``y = x + c x^2 / (white - black)`` in DN).
-* ``hot_pixels``: the loop's log-normal fit becomes the noise stage's single offset, its mean.
+* ``hot_pixels``: the loop's log-normal fit (``log_mean``, ``log_sigma`` of the offsets in DN) is the
+  noise stage's ``hot_offset`` = its mean exp(log_mean + log_sigma^2 / 2) / (white - black) and
+  ``hot_log_sigma`` = log_sigma (the same log-normal).
 * ``channel_gain``: the loop's per-site gain acts after photon counting (it changes the
   variance-to-mean ratio), so it is written as per-site ``beta1`` of the base, not as the noise
   stage's ``channel_gain`` effect (which scales the expected signal, i.e. a QE difference).
@@ -73,8 +75,8 @@ def noise_entry(model: LoopModel) -> tuple[dict, list[str]]:
             effects.append({"type": name, "sigma": float(p["sigma_dn"] / fs)})
         elif name == "hot_pixels":
             mean = float(np.exp(p["log_mean"] + p["log_sigma"] ** 2 / 2))
-            effects.append({"type": "hot_pixels", "hot_fraction": float(p["fraction"]), "hot_offset": mean / fs})
-            notes.append("hot_pixels: log-normal offsets replaced by their mean")
+            effects.append({"type": "hot_pixels", "hot_fraction": float(p["fraction"]), "hot_offset": mean / fs,
+                            "hot_log_sigma": float(p["log_sigma"])})
         elif name == "black_level_offset":
             effects.append({"type": "black_level_offset", "offset": [float(x) / fs for x in p["offset_dn"]]})
         elif name == "quantization":
@@ -158,8 +160,10 @@ def models_from_noise_profile(doc: dict, where: str) -> dict[int, LoopModel]:
                 effects[t] = {"amplitude_dn": float(eff["amplitude"]) * fs, "period_px": float(eff["period_px"]),
                               "axis": "row" if eff.get("axis", "rows") == "rows" else "col"}
             elif t == "hot_pixels":
+                ls = float(eff.get("hot_log_sigma", 0.0))
                 effects[t] = {"fraction": float(eff.get("hot_fraction", 0.0)),
-                              "log_mean": float(np.log(max(eff.get("hot_offset", 0.05) * fs, 1e-6))), "log_sigma": 0.05}
+                              "log_mean": float(np.log(max(eff.get("hot_offset", 0.05) * fs, 1e-6)) - ls * ls / 2),
+                              "log_sigma": ls}
             elif t == "black_level_offset":
                 effects[t] = {"offset_dn": list(np.broadcast_to(np.asarray(eff["offset"], float) * fs, (4,)))}
             elif t == "quantization":

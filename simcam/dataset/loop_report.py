@@ -17,6 +17,11 @@ import numpy as np
 from ..errors import ProfileError
 from . import diagnostics as dg
 from .loop import KL_BINNING, KL_EDGES, LoopConfig, GroupResult, ctx_like
+from .loop_kl import FAMILIES, GATE_Z, STRUCTURED_BINNING
+
+STRUCTURED_KL = (f"sum over the families {', '.join(FAMILIES)} of the held-out noise (per sequence and CFA plane) of "
+                 f"their KL minus its sampling floor, counted where it exceeds {GATE_Z:g} sampling SDs; binning: "
+                 f"{STRUCTURED_BINNING}")
 from .loop_model import LoopModel, simulate_capture
 
 REPORT_SCHEMA = "simcam-loop-report/1"
@@ -67,6 +72,11 @@ def build_report(results: list[GroupResult], capture, cfg: LoopConfig, emva: dic
             "diagnostics_final": [_disc_dict(d) for d in r.final],
             "heldout": {"kl_base": r.heldout_base["kl"], "kl_final": r.heldout_final["kl"],
                         "kl_sampling_floor": r.heldout_final["kl_floor"],
+                        "kl_excess_base": r.heldout_base["kl_excess"], "kl_excess_final": r.heldout_final["kl_excess"],
+                        "kl_structured_base": r.heldout_base["kl_structured"],
+                        "kl_structured_final": r.heldout_final["kl_structured"],
+                        "structured_base": r.heldout_base["structured"],
+                        "structured_final": r.heldout_final["structured"],
                         "nll_base": r.heldout_base["nll"], "nll_final": r.heldout_final["nll"]},
             "emva": emva.get(r.iso),
             "notes": r.notes,
@@ -87,6 +97,7 @@ def build_report(results: list[GroupResult], capture, cfg: LoopConfig, emva: dic
                      "max_size": cfg.max_size, "seed": cfg.seed, "max_iterations": cfg.max_iterations,
                      "simulator": "simcam.noise composite (the profile.yaml entry), Composite.sample_frames"},
         "kl_binning": KL_BINNING,
+        "structured_kl": STRUCTURED_KL,
         "nll_density": "per-pixel Gaussian marginal of the model about the plane mean (null when the model has "
                        "heavy-tailed read noise or hot pixels)",
         "emva": top_emva,
@@ -310,6 +321,31 @@ def _fmt(v):
     return html.escape(str(v))
 
 
+def _drop(before, after) -> str:
+    if not before or before <= 0 or after is None:
+        return ""
+    return f" ({100 * (1 - after / before):.0f} % drop)"
+
+
+def _family_table(h: dict) -> str:
+    """Per-family structured KL, base and final model: KL, sampling floor, z of the excess."""
+    rows = ["<h3>Held-out structured marginal KL per family</h3><table><tr><th>family</th><th>values</th>"
+            "<th>KL base</th><th>floor</th><th>z base</th><th>KL final</th><th>floor</th><th>z final</th>"
+            "<th>counted excess base</th><th>counted excess final</th></tr>"]
+    fb, ff = h.get("structured_base") or {}, h.get("structured_final") or {}
+    for fam in FAMILIES:
+        b, f = fb.get(fam), ff.get(fam)
+        if b is None or f is None:
+            continue
+        cls = " class=sig" if f["significant"] else ""
+        rows.append(f"<tr{cls}><td class=l>{fam}</td><td>{b['n']}</td><td>{_fmt(b['kl'])}</td><td>{_fmt(b['floor'])}</td>"
+                    f"<td>{b['z']:.1f}</td><td>{_fmt(f['kl'])}</td><td>{_fmt(f['floor'])}</td><td>{f['z']:.1f}</td>"
+                    f"<td>{_fmt(b['excess'] if b['significant'] else 0.0)}</td>"
+                    f"<td>{_fmt(f['excess'] if f['significant'] else 0.0)}</td></tr>")
+    rows.append("</table>")
+    return "".join(rows)
+
+
 def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
     parts = ["<!doctype html><html><head><meta charset='utf-8'><title>simcam loop report</title>",
              "<style>body{font-family:sans-serif;margin:2em;max-width:1200px} table{border-collapse:collapse;"
@@ -317,7 +353,8 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
              " td.l{text-align:left} .sig{background:#fdd}</style></head><body>",
              f"<h1>simcam loop report</h1><p>Capture set <code>{html.escape(doc['capture_set'])}</code> "
              f"({doc['layout']}). Significance: {doc['settings']['correction']} at alpha = {doc['settings']['alpha']}"
-             f", {doc['settings']['replicates']} bootstrap replicates. Marginal KL binning: {html.escape(doc['kl_binning'])}.</p>"]
+             f", {doc['settings']['replicates']} bootstrap replicates. Pixel marginal KL: {html.escape(doc['kl_binning'])}. "
+             f"Structured marginal KL: {html.escape(doc['structured_kl'])}.</p>"]
     for note in doc["notes"]:
         parts.append(f"<p><b>Note:</b> {html.escape(note)}</p>")
     if doc.get("emva"):
@@ -328,19 +365,29 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
     for g in doc["isos"]:
         iso = g["iso"]
         parts.append(f"<h2>ISO {iso}</h2><p>Effects added: <b>{', '.join(g['effects']) or 'none'}</b>. "
-                     f"Held-out marginal KL {_fmt(g['heldout']['kl_base'])} (base) → {_fmt(g['heldout']['kl_final'])} "
-                     f"(final); NLL/dim {_fmt(g['heldout']['nll_base'])} → {_fmt(g['heldout']['nll_final'])} nats.</p>")
+                     f"Held-out pixel marginal KL {_fmt(g['heldout']['kl_base'])} (base) → {_fmt(g['heldout']['kl_final'])} "
+                     f"(final; sampling floor {_fmt(g['heldout']['kl_sampling_floor'])}, excess "
+                     f"{_fmt(g['heldout']['kl_excess_base'])} → {_fmt(g['heldout']['kl_excess_final'])}); structured "
+                     f"marginal KL {_fmt(g['heldout']['kl_structured_base'])} → {_fmt(g['heldout']['kl_structured_final'])}"
+                     f"{_drop(g['heldout']['kl_structured_base'], g['heldout']['kl_structured_final'])}; "
+                     f"NLL/dim {_fmt(g['heldout']['nll_base'])} → {_fmt(g['heldout']['nll_final'])} nats.</p>")
+        parts.append(_family_table(g["heldout"]))
         for note in g["notes"]:
             parts.append(f"<p><i>{html.escape(note)}</i></p>")
         parts.append("<h3>Iterations</h3><table><tr><th>#</th><th>effect</th><th>diagnostic</th><th>z before</th>"
-                     "<th>z after</th><th>held-out z before</th><th>held-out z after</th><th>KL before</th>"
-                     "<th>KL after</th><th>NLL before</th><th>NLL after</th><th>kept</th><th>parameters</th></tr>")
+                     "<th>z after</th><th>held-out z before</th><th>held-out z after</th><th>pixel KL before</th>"
+                     "<th>pixel KL after</th><th>KL excess before</th><th>KL excess after</th>"
+                     "<th>structured KL before</th><th>structured KL after</th><th>NLL before</th><th>NLL after</th>"
+                     "<th>kept</th><th>parameters</th></tr>")
         for i, it in enumerate(g["iterations"], 1):
             h = it["heldout"]
             parts.append(f"<tr><td>{i}</td><td class=l>{it['effect']}</td><td class=l>{it['diagnostic']}</td>"
                          f"<td>{_fmt(it['discrepancy_before'])}</td><td>{_fmt(it['discrepancy_after'])}</td>"
                          f"<td>{_fmt(h['discrepancy_before'])}</td><td>{_fmt(h['discrepancy_after'])}</td>"
-                         f"<td>{_fmt(h['kl_before'])}</td><td>{_fmt(h['kl_after'])}</td><td>{_fmt(h['nll_before'])}</td>"
+                         f"<td>{_fmt(h['kl_before'])}</td><td>{_fmt(h['kl_after'])}</td>"
+                         f"<td>{_fmt(h['kl_excess_before'])}</td><td>{_fmt(h['kl_excess_after'])}</td>"
+                         f"<td>{_fmt(h['kl_structured_before'])}</td><td>{_fmt(h['kl_structured_after'])}</td>"
+                         f"<td>{_fmt(h['nll_before'])}</td>"
                          f"<td>{_fmt(h['nll_after'])}</td><td>{'yes' if it['accepted'] else 'no'}</td>"
                          f"<td class=l>{html.escape(json.dumps(it['parameters']))}</td></tr>")
         parts.append("</table>")

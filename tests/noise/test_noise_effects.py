@@ -280,3 +280,33 @@ def test_composite_log_prob_given_fixed_pattern():
 
     with pytest.raises(NoiseModelError, match="row_noise"):
         _comp([{"type": "row_noise", "sigma": 1e-3}]).log_prob(noisy, clean, COND)
+
+
+def test_hot_pixel_log_normal_offsets_match_closed_form_moments():
+    """hot_log_sigma = s > 0: offsets o = m exp(s n - s^2/2), n ~ N(0, 1), i.e. log o ~ N(ln m - s^2/2, s^2)
+    and E[o] = m (closed form). With N hot pixels (binomial, ~8000 here): SE of the mean of log o is
+    s / sqrt(N), of the sample variance of log o s^2 sqrt(2 / (N - 1)), of the mean of o
+    m sqrt(exp(s^2) - 1) / sqrt(N); 5 SE each. The distribution as a whole: KS test against scipy's lognorm."""
+    m_off, s = 0.1, 0.6
+    base = {"type": "gaussian", "sigma": 0.0}
+    e = {"type": "hot_pixels", "hot_fraction": 0.05, "hot_offset": m_off, "hot_log_sigma": s}
+    m = _comp([e], base=base, seed=11)
+    clean = np.zeros((400, 400), np.float32)
+    a = m.sample(clean, COND, np.random.default_rng(1)).astype(np.float64)
+    o = a[a > 0]
+    n = o.size
+    assert abs(n - a.size * 0.05) < 5 * np.sqrt(a.size * 0.05 * 0.95)
+    lo = np.log(o)
+    assert abs(lo.mean() - (np.log(m_off) - s * s / 2)) < 5 * s / np.sqrt(n)
+    assert abs(lo.var(ddof=1) - s * s) < 5 * s * s * np.sqrt(2 / (n - 1))
+    assert abs(o.mean() - m_off) < 5 * m_off * np.sqrt(np.exp(s * s) - 1) / np.sqrt(n)
+    assert stats.kstest(o, stats.lognorm(s, scale=m_off * np.exp(-s * s / 2)).cdf).pvalue > 1e-3
+    # the same pixels are hot as with a constant offset, the pattern persists across frames, and
+    # hot_log_sigma = 0 is today's constant offset, byte for byte
+    const = _comp([dict(e, hot_log_sigma=0.0)], base=base, seed=11).sample(clean, COND, np.random.default_rng(1))
+    old = _comp([{k: v for k, v in e.items() if k != "hot_log_sigma"}], base=base, seed=11).sample(
+        clean, COND, np.random.default_rng(1))
+    assert np.array_equal(const, old) and np.array_equal(const > 0, a > 0)
+    assert np.array_equal(m.sample(clean, COND, np.random.default_rng(2)), a.astype(np.float32))
+    with pytest.raises(Exception, match="hot_log_sigma"):
+        effect_from_entry(dict(e, hot_log_sigma=-0.1))

@@ -19,7 +19,15 @@ class HotPixels(Effect):
     hot_fraction : float
         Fraction of pixels with an extra dark signal ``hot_offset`` (normalised raw) added.
     hot_offset : float
-        The hot pixels' extra signal, normalised raw (e.g. 0.05).
+        The hot pixels' extra signal, normalised raw (e.g. 0.05); with ``hot_log_sigma > 0``
+        the *mean* of their log-normal offsets.
+    hot_log_sigma : float
+        Spread of the hot pixels' offsets, >= 0 (natural-log units, dimensionless). 0 (default):
+        every hot pixel gets ``hot_offset``. Otherwise pixel i gets
+        ``hot_offset * exp(hot_log_sigma * n_i - hot_log_sigma**2 / 2)``, n_i ~ N(0, 1) drawn once
+        per sensor: a log-normal with mean ``hot_offset`` and coefficient of variation
+        ``sqrt(exp(hot_log_sigma**2) - 1)`` (dark-current outliers are roughly log-normal; EMVA 1288
+        sec. 8.3 shows their spread in the dark-signal histogram).
     stuck_fraction : float
         Fraction of pixels that always read ``stuck_value``.
     stuck_value : float
@@ -31,6 +39,7 @@ class HotPixels(Effect):
     type: Literal["hot_pixels"] = "hot_pixels"
     hot_fraction: float = Field(0.0, ge=0, le=1)
     hot_offset: float = 0.05
+    hot_log_sigma: float = Field(0.0, ge=0)
     stuck_fraction: float = Field(0.0, ge=0, le=1)
     stuck_value: float = 1.0
     dead_fraction: float = Field(0.0, ge=0, le=1)
@@ -47,11 +56,17 @@ class HotPixels(Effect):
         stuck = (u >= self.dead_fraction) & (u < self.dead_fraction + self.stuck_fraction)
         t = self.dead_fraction + self.stuck_fraction
         hot = (u >= t) & (u < t + self.hot_fraction)
-        return {"hot": np.flatnonzero(hot), "stuck": np.flatnonzero(stuck), "dead": np.flatnonzero(dead)}
+        hot_idx = np.flatnonzero(hot)
+        out = {"hot": hot_idx, "stuck": np.flatnonzero(stuck), "dead": np.flatnonzero(dead)}
+        if self.hot_log_sigma > 0:  # drawn after the map, so the map is the same as with a constant offset
+            s = float(self.hot_log_sigma)
+            n = rng.standard_normal(hot_idx.size)
+            out["hot_offset"] = (self.hot_offset * np.exp(s * n - s * s / 2)).astype(np.float32)
+        return out
 
     def apply(self, x, ctx):
         flat = x.reshape(-1)
-        flat[ctx.fixed["hot"]] += np.float32(self.hot_offset)
+        flat[ctx.fixed["hot"]] += ctx.fixed.get("hot_offset", np.float32(self.hot_offset))
         flat[ctx.fixed["stuck"]] = np.float32(self.stuck_value)
         flat[ctx.fixed["dead"]] = np.float32(0.0)
         return x
