@@ -343,16 +343,20 @@ def dsnu_excess(d: CaptureData):
 
 
 def hot_pixel_mask(d: CaptureData) -> np.ndarray | None:
-    """Pixels whose *temporal median* over the dark frames is beyond 6 robust sigma (profiles
-    removed): a hot pixel is high in every frame, a heavy-tailed read-noise outlier in one, and
-    the median of a few frames is not moved by one outlier."""
+    """Persistent dark outliers: pixels beyond 6 robust sigma of the dark temporal-*mean* map in
+    both that map and the temporal-*median* map (row/column profiles removed). A hot pixel is high
+    in every frame; a heavy-tailed read-noise outlier lifts one frame, which moves the mean but
+    not the median. (The threshold comes from the mean map: the median of a few coarsely
+    quantised frames sits on so few codes that its own robust spread can collapse to 0.)"""
     if "hotmask" not in d.cache:
-        if not d.darks:
+        dm = d.dark_map()
+        if dm is None:
             d.cache["hotmask"] = None
         else:
-            med = np.median(np.concatenate(d.darks).astype(np.float64), axis=0)
-            r = remove_profiles(med)
-            d.cache["hotmask"] = r > 6 * robust_sigma(r)
+            r_mean = remove_profiles(dm[0])
+            thr = 6 * robust_sigma(r_mean)
+            r_med = remove_profiles(np.median(np.concatenate(d.darks).astype(np.float64), axis=0))
+            d.cache["hotmask"] = (r_mean > thr) & (r_med > thr)
     return d.cache["hotmask"]
 
 
