@@ -118,9 +118,11 @@ def test_structured_heldout_kl_drops(case):
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("seed", [7, 8, 11])
 @pytest.mark.parametrize("case", CASES[1:], ids=lambda c: "+".join(c))
-def test_detection_matrix(case):
-    r = run_case(case)
+def test_detection_matrix(case, seed):
+    # three capture seeds (the benchmark runs 7-16: 260/260 named, structured drop >= 80 % in 250/250)
+    r = run_case(case, seed=seed)
     assert set(r.model.effects) == set(case)
     assert r.unexplained == []
     assert _structured_drop_ok(r), (r.heldout_base["kl_structured"], r.heldout_final["kl_structured"])
