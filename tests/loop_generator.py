@@ -26,6 +26,8 @@ seed eq. 3.6 for the Poisson-Gaussian core)::
 * ``flicker`` N(0, s^2) per frame, only where there is light (``frame_flicker``).
 * ``column_noise`` N(0, s^2) per frame and column: deliberately *outside* simcam's effect
   vocabulary (temporal column noise), to test that the loop reports it as unexplained.
+* ``checker_offset`` N(0, s^2) per frame, added with opposite signs to the 00/11 and the 01/10
+  sites (interleaved readout channels, as in the EMVA 1288 CCD data): also outside the vocabulary.
 """
 
 from __future__ import annotations
@@ -124,6 +126,9 @@ class HiddenEffectSensor:
             hot = rng.random((h, w)) < p["fraction"]
             self.offset += hot * rng.exponential(p["mean_dn"], (h, w))
             self.hot_mask = hot
+        self.checker = np.ones((h, w))
+        self.checker[0::2, 1::2] = -1.0
+        self.checker[1::2, 0::2] = -1.0
         self.prnu = np.ones((h, w))
         if "prnu" in eff:
             self.prnu += rng.normal(0, eff["prnu"]["sigma"], (h, w))
@@ -156,6 +161,8 @@ class HiddenEffectSensor:
                 x = x + rng.normal(0, eff["row_noise"]["sigma_dn"], (h, 1))
             if "column_noise" in eff:  # NOT in simcam's vocabulary: tests the 'unexplained' path
                 x = x + rng.normal(0, eff["column_noise"]["sigma_dn"], (1, w))
+            if "checker_offset" in eff:  # NOT in the vocabulary: interleaved readout channels' offset
+                x = x + rng.normal(0, eff["checker_offset"]["sigma_dn"]) * self.checker
             if "periodic_pattern" in eff:
                 p = eff["periodic_pattern"]
                 r = np.arange(h)[:, None]

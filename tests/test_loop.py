@@ -164,3 +164,17 @@ def test_effect_outside_the_vocabulary_is_reported_unexplained():
     assert set(un) <= {"col_temporal_excess", "col_fpn_excess", "col_spectrum_peak"}
     if "col_fpn_excess" in un:
         assert un["col_fpn_excess"]["reason"].startswith("not attributed: col_temporal_excess")
+
+
+def test_checkerboard_frame_offset_outside_the_vocabulary_is_reported_unexplained():
+    # a per-frame offset of opposite sign on the 00/11 and 01/10 sites (seen on the EMVA 1288 CCD
+    # darks): no effect of the vocabulary makes it, so it must be reported, not forced into one.
+    # 0.3 DN per frame against a white-noise expectation of 3 DN / 64 = 0.047 DN: ~40x in variance
+    from loop_matrix import in_memory_capture
+    from simcam.dataset.loop import LoopConfig, run_loop
+
+    spec = SensorSpec(effects={"checker_offset": {"sigma_dn": 0.3}})
+    r = run_loop(in_memory_capture(capture_set(spec)), LoopConfig())[0]
+    assert list(r.model.effects) == []
+    un = {u["diagnostic"]: u for u in r.unexplained}
+    assert set(un) == {"dark_checker_jitter"} and "no effect of the vocabulary" in un["dark_checker_jitter"]["reason"]

@@ -18,6 +18,9 @@ row_spectrum_peak       periodic_pattern    max / median of the periodogram of r
                                             9-bin running median)
 col_spectrum_peak       periodic_pattern    same along columns
 col_temporal_excess     (none)              var(column means of temporal residual) / (pixel var / H)
+dark_checker_jitter     (none)              log of: var over dark frames of the checkerboard contrast
+                                            of the temporal residual (sites 00 + 11 - 01 - 10) /
+                                            (pixel var / pixels)
 col_fpn_excess          column_fpn          cov(column means of even- and odd-frame dark mean maps) /
                                             (map var / H)
 dsnu_excess             dsnu                robust var of the dark mean map (rows/cols removed) /
@@ -56,6 +59,7 @@ DIAGNOSTIC_EFFECT = {
     "row_spectrum_peak": "periodic_pattern",
     "col_spectrum_peak": "periodic_pattern",
     "col_temporal_excess": None,
+    "dark_checker_jitter": None,
     "col_fpn_excess": "column_fpn",
     "dsnu_excess": "dsnu",
     "hot_pixel_tail": "hot_pixels",
@@ -76,6 +80,8 @@ DIAGNOSTICS = tuple(DIAGNOSTIC_EFFECT)
 PRECEDENCE = {
     "row_mean_excess": ("row_spectrum_peak",),
     "col_temporal_excess": ("col_spectrum_peak",),
+    # in-plane crosstalk and quantisation change the spread of per-site means too
+    "dark_checker_jitter": ("lag1_corr", "lag2_corr", "code_occupancy"),
     "dsnu_excess": ("hot_pixel_tail",),
     "col_fpn_excess": ("hot_pixel_tail", "dsnu_excess"),  # per-pixel fixed offsets leak into column means
     "black_offset": ("hot_pixel_tail", "col_fpn_excess", "dsnu_excess"),
@@ -256,6 +262,29 @@ def row_mean_excess(d):
 
 def col_temporal_excess(d):
     return _excess(d, 1)
+
+
+def dark_checker_jitter(d: CaptureData):
+    """Per-frame offset alternating between the 2x2 sites in a checkerboard (00, 11 vs 01, 10), from
+    the dark temporal residuals: the variance over frames of the residual's checkerboard-weighted
+    mean over its white-noise expectation (pixel variance / pixel count; 1 for white noise).
+    Row offsets (row noise, periodic patterns), column offsets and frame offsets cancel in this
+    contrast, flicker needs light; what raises it is a per-frame offset between interleaved
+    readout channels -- outside the effect vocabulary, so it is reported, not attributed."""
+    res = d.temporal_residuals("dark")
+    if not res:
+        return None
+    vals = []
+    for r in res:
+        h, w = r.shape[1:]
+        sign = np.ones((h, w))
+        sign[0::2, 1::2] = -1.0
+        sign[1::2, 0::2] = -1.0
+        c = np.einsum("fyx,yx->f", r, sign) / (h * w)
+        vals.append(float(np.mean(c * c)) / (float(np.var(r)) / (h * w)))
+    # a mean of a few chi-square(1) terms is skewed (the bootstrap's normal approximation would
+    # understate its right tail); its logarithm is close to symmetric
+    return float(np.log(np.mean(vals)))
 
 
 def periodogram(d: CaptureData, axis: int) -> np.ndarray | None:
