@@ -8,7 +8,9 @@ describing what was drawn (it ends up in the sample's ``meta``).
 own thread pool (onnxruntime) and needs ``spawn`` worker processes; a sampler
 with ``writes_out = True`` also takes ``out=`` (a float32 array of the clean
 patch's shape) and writes the noisy patch there, which lets a batch be made in
-place (:meth:`simcam.dataset.torchdata.PatchMaker.make_batch`).
+place (:meth:`simcam.dataset.torchdata.PatchMaker.make_batch`); one whose ``packs``
+is true also has ``pack_noise(mosaic_crop, rng, info, clean_out, noisy_out) -> params``,
+packing and adding noise in one pass (same bytes as ``pack`` then ``__call__``).
 """
 
 from __future__ import annotations
@@ -56,6 +58,13 @@ def hetero_gaussian(clean: np.ndarray, beta1: float, beta2: float, rng: np.rando
     return noisy
 
 
+def _packed_kernel(mosaic, beta1, beta2, rng, clean_out, noisy_out, clip: bool) -> None:
+    from ..noise.nlf_kernel import nlf_noise_packed
+
+    nlf_noise_packed(np.asarray(mosaic, dtype=np.float32), beta1, beta2, rng, clean_out, noisy_out,
+                     clip=(0.0, 1.0) if clip else None)
+
+
 def standard_normal(rng: np.random.Generator, shape: tuple[int, ...], backend: str = "auto") -> np.ndarray:
     """float32 standard normals drawn from ``rng`` (numpy) or from a torch generator seeded by ``rng``."""
     if backend not in ("auto", "numpy", "torch"):
@@ -97,6 +106,18 @@ class GaussianNoise:
             out[...] = noisy
             noisy = out
         return noisy, {"beta1": 0.0, "beta2": s * s}
+
+    @property
+    def packs(self) -> bool:
+        """Whether :meth:`pack_noise` is available (the fused kernel)."""
+        return self.normals == "kernel"
+
+    def pack_noise(self, mosaic, rng, info, clean_out, noisy_out) -> dict:
+        """Pack a 2p x 2p crop into ``clean_out`` and write the noisy patch into ``noisy_out`` in one
+        pass: the bytes of ``pack`` followed by ``self(clean, rng, info, out=noisy_out)``."""
+        s = float(rng.uniform(*self.sigma))
+        _packed_kernel(mosaic, 0.0, s * s, rng, clean_out, noisy_out, self.clip)
+        return {"beta1": 0.0, "beta2": s * s}
 
 
 @dataclass
@@ -145,6 +166,18 @@ class NLFNoise:
     def __call__(self, clean: np.ndarray, rng: np.random.Generator, info: dict | None = None, out=None):
         b1, b2 = self.draw(rng)
         return hetero_gaussian(clean, b1, b2, rng, self.clip, self.normals, out), {"beta1": b1, "beta2": b2}
+
+    @property
+    def packs(self) -> bool:
+        """Whether :meth:`pack_noise` is available (the fused kernel)."""
+        return self.normals == "kernel"
+
+    def pack_noise(self, mosaic, rng, info, clean_out, noisy_out) -> dict:
+        """Pack a 2p x 2p crop into ``clean_out`` and write the noisy patch into ``noisy_out`` in one
+        pass: the bytes of ``pack`` followed by ``self(clean, rng, info, out=noisy_out)``."""
+        b1, b2 = self.draw(rng)
+        _packed_kernel(mosaic, b1, b2, rng, clean_out, noisy_out, self.clip)
+        return {"beta1": b1, "beta2": b2}
 
 
 @dataclass

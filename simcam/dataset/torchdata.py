@@ -185,17 +185,24 @@ class PatchMaker:
             mosaic, drawn = self.unprocess(src.data[top:top + p2, left:left + p2], rng)
             out_cfa = self.unprocess.cfa
             unproc = {"red_gain": drawn["red_gain"], "blue_gain": drawn["blue_gain"], "rgb_gain": drawn["rgb_gain"]}
-        for c, (dy, dx) in enumerate(PACK_OFFSETS):
-            clean_out[c] = mosaic[dy::2, dx::2]
         noise_rng = np.random.default_rng(noise_ss)
         info = {"cfa": out_cfa}
+        if getattr(self.noise, "packs", False):  # pack and noise in one pass, same bytes
+            params = self.noise.pack_noise(mosaic, noise_rng, info, clean_out, noisy_out)
+            return self._meta(index, epoch, k, top, left, out_cfa, params, unproc)
+        for c, (dy, dx) in enumerate(PACK_OFFSETS):
+            clean_out[c] = mosaic[dy::2, dx::2]
         if getattr(self.noise, "writes_out", False):
             _, params = self.noise(clean_out, noise_rng, info, out=noisy_out)
         else:
             noisy, params = self.noise(clean_out, noise_rng, info)
             noisy_out[...] = noisy
+        return self._meta(index, epoch, k, top, left, out_cfa, params, unproc)
+
+    @staticmethod
+    def _meta(index, epoch, k, top, left, cfa, params, unproc) -> dict[str, Any]:
         return {"index": int(index), "epoch": int(epoch), "source": k, "top": top, "left": left,
-                "cfa": out_cfa, **{k2: float(v) for k2, v in params.items()}, **unproc}
+                "cfa": cfa, **{k2: float(v) for k2, v in params.items()}, **unproc}
 
     def make_batch(self, indices: Sequence[int], epoch: int,
                    source_indices: Sequence[int] | None = None) -> "PatchBatch":

@@ -103,3 +103,77 @@ def nlf_noise(clean: np.ndarray, beta1: float, beta2: float, rng: np.random.Gene
     _nlf_kernel(c.reshape(-1), np.float32(beta1), np.float32(beta2), np.float32(lo), np.float32(hi),
                 out.reshape(-1), seed, ZIG_K, ZIG_W, ZIG_F, ZIG_R)
     return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _nlf_pack_kernel(mosaic, beta1, beta2, lo, hi, clean_out, noisy_out, seed, zk, zw, zf, zr):
+    """:func:`_nlf_kernel` reading a 2p x 2q mosaic crop and writing its packed planes
+    (``clean_out``) and their noisy copy (``noisy_out``, both 4 x p x q) in the same pass; element
+    (c, y, x) is element ``(c p + y) q + x`` of the packed array, so the output is byte-identical
+    to packing first and calling :func:`_nlf_kernel` on the result."""
+    p, q = clean_out.shape[1], clean_out.shape[2]
+    c0 = seed[0]
+    ctr = seed[1]
+    q8 = (q + 7) // 8 * 8
+    words = np.empty(q, np.uint64)
+    zb = np.empty(q, np.float32)
+    first = np.ones(q8, np.uint8)
+    first8 = first.view(np.uint64)
+    for c in range(4):
+        dy = c // 2
+        dx = c % 2
+        for y in range(p):
+            base = c0 + np.uint64((c * p + y) * q) * _GAMMA
+            for xx in range(q):
+                words[xx] = _mix(base + np.uint64(xx + 1) * _GAMMA)
+            for xx in range(q):
+                w = words[xx]
+                idx = w & _M8
+                rabs = (w >> _U9) & _M52
+                sign = 1.0 - 2.0 * np.float64((w >> _U8) & _U1)
+                zb[xx] = np.float32(np.float64(np.int64(rabs)) * zw[idx] * sign)
+                first[xx] = np.uint8(rabs < zk[idx])
+            for g in range(q8 // 8):
+                if first8[g] != _ALL_ACCEPTED:
+                    for xx in range(8 * g, min(8 * g + 8, q)):
+                        if first[xx] == 0:
+                            z, ctr = zig_normal(words[xx], ctr, zk, zw, zf, zr)
+                            zb[xx] = np.float32(z)
+            row = mosaic[2 * y + dy]
+            for xx in range(q):
+                x = row[2 * xx + dx]
+                clean_out[c, y, xx] = x
+                v = beta1 * x + beta2
+                sd = np.float32(np.sqrt(max(v, np.float32(0.0))))
+                yv = x + sd * zb[xx]
+                noisy_out[c, y, xx] = min(max(yv, lo), hi)
+
+
+def nlf_noise_packed(mosaic: np.ndarray, beta1: float, beta2: float, rng: np.random.Generator,
+                     clean_out: np.ndarray, noisy_out: np.ndarray, *,
+                     clip: tuple[float, float] | None = (0.0, 1.0)) -> None:
+    """Pack a 2p x 2q mosaic crop into ``clean_out`` (4 x p x q, channels in
+    :data:`simcam.cfa.PACK_OFFSETS` order) and write its NLF-noisy copy into ``noisy_out``, in one
+    pass; same bytes as ``pack`` followed by :func:`nlf_noise` with the same ``rng``.
+
+    Parameters
+    ----------
+    mosaic : ndarray
+        float32 crop (may be a strided view of a larger mosaic), normalised raw.
+    beta1, beta2, rng, clip
+        As in :func:`nlf_noise`.
+    clean_out, noisy_out : ndarray
+        float32 C-contiguous 4 x p x q outputs.
+    """
+    p, q = clean_out.shape[1:]
+    if (mosaic.dtype != np.float32 or mosaic.shape != (2 * p, 2 * q) or clean_out.shape != noisy_out.shape
+            or clean_out.shape[0] != 4):
+        raise ValueError(f"nlf_noise_packed: expected a float32 {2 * p}x{2 * q} crop and two 4x{p}x{q} outputs, "
+                         f"got {mosaic.dtype} {mosaic.shape}, {clean_out.shape}, {noisy_out.shape}")
+    for name, a in (("clean_out", clean_out), ("noisy_out", noisy_out)):
+        if a.dtype != np.float32 or not a.flags.c_contiguous:
+            raise ValueError(f"nlf_noise_packed: {name} must be C-contiguous float32, got {a.dtype}")
+    lo, hi = (-np.inf, np.inf) if clip is None else clip
+    seed = rng.bit_generator.random_raw(2).astype(np.uint64)
+    _nlf_pack_kernel(mosaic, np.float32(beta1), np.float32(beta2), np.float32(lo), np.float32(hi),
+                     clean_out, noisy_out, seed, ZIG_K, ZIG_W, ZIG_F, ZIG_R)

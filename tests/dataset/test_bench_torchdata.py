@@ -76,6 +76,20 @@ def test_thread_workers_give_the_batches_of_process_workers():
         make_loader(ds, batch_size=2, workers="threads")
 
 
+def test_fused_pack_and_noise_gives_the_bytes_of_pack_then_noise():
+    # NLFNoise/GaussianNoise pack and add noise in one kernel pass; hiding that (a plain callable)
+    # takes the pack-then-__call__ path, which must give identical samples
+    for noise in (NLF, GaussianNoise(sigma=(0.01, 0.05))):
+        fused = NoisyPatchDataset(_clean_sources(), noise, length=4, patch_size=8, seed=2, cfa="GRBG")
+        plain = NoisyPatchDataset(_clean_sources(), lambda c, r, i, n=noise: n(c, r, i), length=4, patch_size=8,
+                                  seed=2, cfa="GRBG")
+        assert noise.packs
+        for i in range(4):
+            a, b = fused[i], plain[i]
+            assert torch.equal(a["noisy"], b["noisy"]) and torch.equal(a["clean"], b["clean"])
+            assert a["meta"] == b["meta"]
+
+
 def test_stream_same_batches_with_0_and_2_workers():
     st = NoisyPatchStream(_clean_sources(5), NLF, patches_per_file=3, batch_size=4, patch_size=8, seed=1)
     b0 = _batches(make_loader(st, batch_size=4, num_workers=0))

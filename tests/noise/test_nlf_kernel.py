@@ -60,3 +60,17 @@ def test_deterministic_in_place_and_shape_kept():
     assert not np.array_equal(a, nlf_noise(x, 1e-3, 1e-5, np.random.default_rng(8)))
     with pytest.raises(ValueError, match="C-contiguous float32"):
         nlf_noise(x, 1e-3, 1e-5, np.random.default_rng(7), out=np.empty(x.shape, np.float64))
+
+
+@pytest.mark.parametrize("p", [1, 5, 64])
+def test_packed_variant_equals_pack_then_noise(p):
+    from simcam.cfa import pack
+    from simcam.noise.nlf_kernel import nlf_noise_packed
+
+    src = np.random.default_rng(0).random((300, 310), dtype=np.float32)
+    crop = src[3:3 + 2 * p, 7:7 + 2 * p]  # a strided view, odd offsets
+    clean = np.ascontiguousarray(pack(crop))
+    noisy = nlf_noise(clean, 1e-2, 1e-4, np.random.default_rng(5))
+    c2, n2 = np.empty((4, p, p), np.float32), np.empty((4, p, p), np.float32)
+    nlf_noise_packed(crop, 1e-2, 1e-4, np.random.default_rng(5), c2, n2)
+    assert np.array_equal(clean, c2) and np.array_equal(noisy, n2)
