@@ -32,6 +32,34 @@ _ALL_ACCEPTED = np.uint64(0x0101010101010101)
 PASS = 1024
 
 
+@njit(inline="always")
+def _normals(base, m, words, zb, first, first8, ctr, zk, zw, zf, zr):
+    """Standard normals for the ``m`` counters ``base + (j + 1) gamma`` into ``zb[:m]`` (float32);
+    ``first`` / ``first8`` are scratch flags of a length that is a multiple of 8. Returns the
+    advanced rejection-stream counter."""
+    for j in range(m):  # counter-based words: vectorises
+        words[j] = _mix(base + np.uint64(j + 1) * _GAMMA)
+    # the ziggurat's first try for every element (branch-free, vectorises) ...
+    for j in range(m):
+        w = words[j]
+        idx = w & _M8
+        rabs = (w >> _U9) & _M52
+        sign = 1.0 - 2.0 * np.float64((w >> _U8) & _U1)
+        zb[j] = np.float32(np.float64(np.int64(rabs)) * zw[idx] * sign)
+        first[j] = np.uint8(rabs < zk[idx])
+    for j in range(m, first.size):
+        first[j] = 1
+    # ... the rare rejected ones (about 1.2 %) redone in full from the same word, as zig_normal does;
+    # 8 flags per word skip the runs of accepted first tries
+    for g in range(first8.size):
+        if first8[g] != _ALL_ACCEPTED:
+            for j in range(8 * g, 8 * g + 8):
+                if first[j] == 0:
+                    z, ctr = zig_normal(words[j], ctr, zk, zw, zf, zr)
+                    zb[j] = np.float32(z)
+    return ctr
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def _nlf_kernel(clean, beta1, beta2, lo, hi, out, seed, zk, zw, zf, zr):
     c0 = seed[0]
@@ -40,29 +68,10 @@ def _nlf_kernel(clean, beta1, beta2, lo, hi, out, seed, zk, zw, zf, zr):
     words = np.empty(PASS, np.uint64)
     zb = np.empty(PASS, np.float32)
     first = np.empty(PASS, np.uint8)
-    first8 = first.view(np.uint64)  # 8 flags per word: skip runs of accepted first tries
+    first8 = first.view(np.uint64)
     for p0 in range(0, n, PASS):
         m = min(PASS, n - p0)
-        base = c0 + np.uint64(p0) * _GAMMA
-        for q in range(m):  # counter-based words: vectorises
-            words[q] = _mix(base + np.uint64(q + 1) * _GAMMA)
-        # the ziggurat's first try for every element (branch-free, vectorises) ...
-        for ii in range(m):
-            w = words[ii]
-            idx = w & _M8
-            rabs = (w >> _U9) & _M52
-            sign = 1.0 - 2.0 * np.float64((w >> _U8) & _U1)
-            zb[ii] = np.float32(np.float64(np.int64(rabs)) * zw[idx] * sign)
-            first[ii] = np.uint8(rabs < zk[idx])
-        for ii in range(m, PASS):
-            first[ii] = 1
-        # ... the rare rejected ones (about 1.2 %) redone in full from the same word, as zig_normal does
-        for g in range(PASS // 8):
-            if first8[g] != _ALL_ACCEPTED:
-                for ii in range(8 * g, 8 * g + 8):
-                    if first[ii] == 0:
-                        z, ctr = zig_normal(words[ii], ctr, zk, zw, zf, zr)
-                        zb[ii] = np.float32(z)
+        ctr = _normals(c0 + np.uint64(p0) * _GAMMA, m, words, zb, first, first8, ctr, zk, zw, zf, zr)
         for ii in range(m):
             x = clean[p0 + ii]
             v = beta1 * x + beta2
@@ -118,30 +127,16 @@ def _nlf_pack_kernel(mosaic, beta1, beta2, lo, hi, clean_out, noisy_out, seed, z
     c0 = seed[0]
     ctr = seed[1]
     q8 = (q + 7) // 8 * 8
-    words = np.empty(q, np.uint64)
-    zb = np.empty(q, np.float32)
-    first = np.ones(q8, np.uint8)
+    words = np.empty(q8, np.uint64)
+    zb = np.empty(q8, np.float32)
+    first = np.empty(q8, np.uint8)
     first8 = first.view(np.uint64)
     for c in range(4):
         dy = c // 2
         dx = c % 2
         for y in range(p):
-            base = c0 + np.uint64((c * p + y) * q) * _GAMMA
-            for xx in range(q):
-                words[xx] = _mix(base + np.uint64(xx + 1) * _GAMMA)
-            for xx in range(q):
-                w = words[xx]
-                idx = w & _M8
-                rabs = (w >> _U9) & _M52
-                sign = 1.0 - 2.0 * np.float64((w >> _U8) & _U1)
-                zb[xx] = np.float32(np.float64(np.int64(rabs)) * zw[idx] * sign)
-                first[xx] = np.uint8(rabs < zk[idx])
-            for g in range(q8 // 8):
-                if first8[g] != _ALL_ACCEPTED:
-                    for xx in range(8 * g, min(8 * g + 8, q)):
-                        if first[xx] == 0:
-                            z, ctr = zig_normal(words[xx], ctr, zk, zw, zf, zr)
-                            zb[xx] = np.float32(z)
+            ctr = _normals(c0 + np.uint64((c * p + y) * q) * _GAMMA, q, words, zb, first, first8, ctr,
+                           zk, zw, zf, zr)
             row = mosaic[2 * y + dy]
             for xx in range(q):
                 x = row[2 * xx + dx]
