@@ -9,7 +9,8 @@ Run: ``python benchmarks/loop_detection_matrix.py [--seeds 7,8,9]`` (capture-noi
 first prints the full table with fitted parameters, the others only the summary). Columns: the
 held-out one-pixel KL (Noise Flow binning) at the base fit and the final model, its sampling floor and
 drop; the structured marginal KL (``simcam.dataset.loop_kl``: sum over aggregated-noise families of
-their significant floor-corrected KLs) at base and final and its drop.
+their significant floor-corrected KLs) at base and final and its drop (``Sdrop``); ``Udrop`` the
+drop of the ungated sum (every family's floor-corrected excess, significant or not).
 """
 
 import argparse
