@@ -216,19 +216,22 @@ def fit_nonlinearity(d, model, ctx):
 
 # ------------------------------------------------------------------ indirect fits
 
+def simulated_statistics(d, model, effect, make_params, grid, stat_names, specs, rng_seed, reps=3) -> np.ndarray:
+    """(len(grid), reps, len(stat_names)) statistics of captures simulated from ``model`` with
+    ``effect`` at each ``grid`` value (``reps`` sensors each, seeds ``[rng_seed, j, r]``)."""
+    vals = np.empty((len(grid), reps, len(stat_names)))
+    for j, g in enumerate(grid):
+        m = model.with_effect(effect, make_params(g))
+        for r in range(reps):
+            cd = ctx_like(d, simulate_capture(m, specs, np.random.default_rng([rng_seed, j, r])), specs)
+            vals[j, r] = [dg.STATISTICS[n](cd) for n in stat_names]
+    return vals
+
+
 def indirect_fit(d, model, effect, make_params, grid, stat_name, specs, rng_seed, reps=3):
     """Parameter on ``grid`` whose simulated ``stat_name`` (mean of ``reps`` sensors) matches the data."""
     target = dg.STATISTICS[stat_name](d)
-    means = []
-    for j, g in enumerate(grid):
-        m = model.with_effect(effect, make_params(g))
-        vals = []
-        for r in range(reps):
-            rng = np.random.default_rng([rng_seed, j, r])
-            sims = simulate_capture(m, specs, rng)
-            vals.append(dg.STATISTICS[stat_name](ctx_like(d, sims, specs)))
-        means.append(np.mean(vals))
-    means = np.asarray(means)
+    means = simulated_statistics(d, model, effect, make_params, grid, (stat_name,), specs, rng_seed, reps)[:, :, 0].mean(1)
     order = np.argsort(means)
     return float(np.interp(target, means[order], np.asarray(grid)[order]))
 
@@ -254,12 +257,7 @@ def indirect_fit_joint(d, model, effect, make_params, grid, stat_names, specs, r
     and the sum of squared discrepancies, each in units of its pooled simulation SD, is minimised
     (indirect inference, Gourieroux, Monfort & Renault 1993, doi:10.1002/jae.3950080507)."""
     targets = np.array([dg.STATISTICS[n](d) for n in stat_names])
-    vals = np.empty((len(grid), reps, len(stat_names)))
-    for j, g in enumerate(grid):
-        m = model.with_effect(effect, make_params(g))
-        for r in range(reps):
-            cd = ctx_like(d, simulate_capture(m, specs, np.random.default_rng([rng_seed, j, r])), specs)
-            vals[j, r] = [dg.STATISTICS[n](cd) for n in stat_names]
+    vals = simulated_statistics(d, model, effect, make_params, grid, stat_names, specs, rng_seed, reps)
     means = vals.mean(1)  # (grid, stats)
     sd = np.sqrt(np.mean(vals.var(1, ddof=1), axis=0)) + 1e-12  # pooled over the grid
     g = np.asarray(grid, dtype=np.float64)
