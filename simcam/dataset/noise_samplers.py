@@ -81,16 +81,34 @@ def standard_normal(rng: np.random.Generator, shape: tuple[int, ...], backend: s
     return rng.standard_normal(shape, dtype=np.float32)
 
 
+class _FusedKernelNoise:
+    """What the two kernel-backed samplers share: ``__call__`` takes ``out=``, and with
+    ``normals="kernel"`` :meth:`pack_noise` packs and adds noise in one pass. Subclasses
+    define ``draw(rng) -> (beta1, beta2)``, ``clip`` and ``normals``."""
+
+    writes_out = True  # __call__ takes ``out=``
+
+    @property
+    def packs(self) -> bool:
+        """Whether :meth:`pack_noise` is available (the fused kernel)."""
+        return self.normals == "kernel"
+
+    def pack_noise(self, mosaic, rng, info, clean_out, noisy_out) -> dict:
+        """Pack a 2p x 2p crop into ``clean_out`` and write the noisy patch into ``noisy_out`` in one
+        pass: the bytes of ``pack`` followed by ``self(clean, rng, info, out=noisy_out)``."""
+        b1, b2 = self.draw(rng)
+        _packed_kernel(mosaic, b1, b2, rng, clean_out, noisy_out, self.clip)
+        return {"beta1": b1, "beta2": b2}
+
+
 @dataclass
-class GaussianNoise:
+class GaussianNoise(_FusedKernelNoise):
     """Homoscedastic Gaussian noise, sigma ~ U(lo, hi) per sample (normalised raw units)."""
 
     sigma: tuple[float, float] = (0.24 / 255, 11.51 / 255)  # seed section 6.5's range, 8-bit units / 255
     clip: bool = False
     normals: str = "kernel"
     needs_spawn: bool = False
-
-    writes_out = True  # __call__ takes ``out=``
 
     def __post_init__(self):
         _check_normals(self.normals)
@@ -107,21 +125,14 @@ class GaussianNoise:
             noisy = out
         return noisy, {"beta1": 0.0, "beta2": s * s}
 
-    @property
-    def packs(self) -> bool:
-        """Whether :meth:`pack_noise` is available (the fused kernel)."""
-        return self.normals == "kernel"
-
-    def pack_noise(self, mosaic, rng, info, clean_out, noisy_out) -> dict:
-        """Pack a 2p x 2p crop into ``clean_out`` and write the noisy patch into ``noisy_out`` in one
-        pass: the bytes of ``pack`` followed by ``self(clean, rng, info, out=noisy_out)``."""
+    def draw(self, rng: np.random.Generator) -> tuple[float, float]:
+        """(beta1, beta2) = (0, sigma^2) of one sample (what ``__call__`` draws first)."""
         s = float(rng.uniform(*self.sigma))
-        _packed_kernel(mosaic, 0.0, s * s, rng, clean_out, noisy_out, self.clip)
-        return {"beta1": 0.0, "beta2": s * s}
+        return 0.0, s * s
 
 
 @dataclass
-class NLFNoise:
+class NLFNoise(_FusedKernelNoise):
     """Heteroscedastic Gaussian noise ``var = beta1 y + beta2`` (seed eq. 5.2), clipped to [0, 1] (eq. 5.3).
 
     Parameters
@@ -147,7 +158,6 @@ class NLFNoise:
     clip: bool = True
     normals: str = "kernel"
     needs_spawn: bool = False
-    writes_out = True  # __call__ takes ``out=``
 
     def __post_init__(self):
         _check_normals(self.normals)
@@ -166,18 +176,6 @@ class NLFNoise:
     def __call__(self, clean: np.ndarray, rng: np.random.Generator, info: dict | None = None, out=None):
         b1, b2 = self.draw(rng)
         return hetero_gaussian(clean, b1, b2, rng, self.clip, self.normals, out), {"beta1": b1, "beta2": b2}
-
-    @property
-    def packs(self) -> bool:
-        """Whether :meth:`pack_noise` is available (the fused kernel)."""
-        return self.normals == "kernel"
-
-    def pack_noise(self, mosaic, rng, info, clean_out, noisy_out) -> dict:
-        """Pack a 2p x 2p crop into ``clean_out`` and write the noisy patch into ``noisy_out`` in one
-        pass: the bytes of ``pack`` followed by ``self(clean, rng, info, out=noisy_out)``."""
-        b1, b2 = self.draw(rng)
-        _packed_kernel(mosaic, b1, b2, rng, clean_out, noisy_out, self.clip)
-        return {"beta1": b1, "beta2": b2}
 
 
 @dataclass
