@@ -103,6 +103,41 @@ NULL_NEEDS = {
 }
 
 
+class NotApplicable(Exception):
+    """Raised by a statistic that is undefined on the data; its message is the reason the report gives."""
+
+
+#: Reason reported when a statistic returns None: what it needs and the capture set lacks.
+NEEDS = {
+    "ptc_curvature": "needs >= 3 flat sequences",
+    "plane_gain_spread": "needs a CFA sensor and flats (with darks, or >= 2 flats)",
+    "row_mean_excess": "needs a dark or flat sequence",
+    "col_temporal_excess": "needs a dark or flat sequence",
+    "row_spectrum_peak": "needs a dark or flat sequence",
+    "col_spectrum_peak": "needs a dark or flat sequence",
+    "dark_checker_jitter": "needs a dark sequence",
+    "col_fpn_excess": "needs a dark or flat sequence",
+    "dsnu_excess": "needs a dark sequence",
+    "hot_pixel_tail": "needs a dark sequence",
+    "prnu_excess": "needs a flat sequence",
+    "black_offset": "needs a dark sequence and a declared black level",
+    "frame_mean_jitter": "needs a flat sequence",
+    "dark_tail_mass": "needs a dark sequence",
+    "dark_ppcc_lambda": "needs a dark sequence",
+    "code_occupancy": "needs a dark or flat sequence",
+    "lag1_corr": "needs a dark sequence",
+    "lag2_corr": "needs a dark sequence",
+}
+
+
+def _ratio(num: float, den: float, what: str) -> float:
+    """num / den, or :class:`NotApplicable` naming ``what`` when the denominator is zero or not finite."""
+    den = float(den)
+    if not np.isfinite(den) or den <= 0.0:
+        raise NotApplicable(f"{what} is {den:g} (constant or quantisation-dominated data)")
+    return float(num) / den
+
+
 @dataclass
 class CaptureData:
     """Frames of one ISO group as the diagnostics see them (DN, float32).
@@ -209,8 +244,10 @@ def ptc_curvature(d: CaptureData):
     for c in range(4):
         x = pts[:, c, 0] - mu0[c]
         y = pts[:, c, 1]
+        if np.unique(x).size < 3:
+            raise NotApplicable("fewer than 3 distinct flat levels on a CFA plane")
         c2, c1, _c0 = np.polyfit(x, y, 2)
-        t.append(c2 * x.max() / c1)
+        t.append(_ratio(c2 * x.max(), c1, "the photon-transfer slope"))
     return float(np.mean(t))
 
 
@@ -233,7 +270,7 @@ def plane_gain_spread(d: CaptureData):
     if d.cfa is None:
         return None
     k = plane_slopes(d)
-    return None if k is None else float(np.std(k) / np.mean(k))
+    return None if k is None else _ratio(np.std(k), np.mean(k), "the mean photon-transfer slope")
 
 
 def _line_means(which: str, axis: int, d: CaptureData) -> list[np.ndarray]:
@@ -252,7 +289,7 @@ def _excess(d: CaptureData, axis: int):
     vals = []
     for r, m in zip(res, lm):
         npx = r.shape[axis]
-        vals.append(np.var(m, axis=1).mean() / (np.var(r) / npx))
+        vals.append(_ratio(np.var(m, axis=1).mean(), np.var(r) / npx, "the temporal residual's variance"))
     return float(np.mean(vals))
 
 
@@ -281,10 +318,13 @@ def dark_checker_jitter(d: CaptureData):
         sign[0::2, 1::2] = -1.0
         sign[1::2, 0::2] = -1.0
         c = np.einsum("fyx,yx->f", r, sign) / (h * w)
-        vals.append(float(np.mean(c * c)) / (float(np.var(r)) / (h * w)))
+        vals.append(_ratio(np.mean(c * c), float(np.var(r)) / (h * w), "the dark temporal residual's variance"))
     # a mean of a few chi-square(1) terms is skewed (the bootstrap's normal approximation would
     # understate its right tail); its logarithm is close to symmetric
-    return float(np.log(np.mean(vals)))
+    m = float(np.mean(vals))
+    if m <= 0:
+        raise NotApplicable("the checkerboard contrast of the dark residuals is exactly 0 in every frame")
+    return float(np.log(m))
 
 
 def periodogram(d: CaptureData, axis: int) -> np.ndarray | None:
@@ -311,9 +351,18 @@ def whitened_periodogram(d: CaptureData, axis: int) -> np.ndarray | None:
             d.cache[key] = None
         else:
             ps = [np.abs(np.fft.rfft(m - m.mean(axis=1, keepdims=True), axis=1)) ** 2 for m in lm]
-            ps = [p / np.median(p[:, 1:], axis=1, keepdims=True) for p in ps]
+            meds = [np.median(p[:, 1:], axis=1, keepdims=True) for p in ps]
+            if ps[0].shape[1] < 4 or any(np.any(m <= 0) for m in meds):
+                d.cache[key] = NotApplicable("the periodogram of line means has a zero median (constant lines) "
+                                             "or fewer than 3 frequencies")
+                return d.cache[key]
+            ps = [p / m for p, m in zip(ps, meds)]
             mean = np.concatenate(ps).mean(0)
-            mean[1:] /= median_filter(mean[1:], size=SPECTRUM_SMOOTH_BINS, mode="nearest")
+            smooth = median_filter(mean[1:], size=SPECTRUM_SMOOTH_BINS, mode="nearest")
+            if np.any(smooth <= 0):
+                d.cache[key] = NotApplicable("the smoothed periodogram of line means has empty bins")
+                return d.cache[key]
+            mean[1:] /= smooth
             d.cache[key] = mean
     return d.cache[key]
 
@@ -322,8 +371,10 @@ def _peak(d, axis):
     p = whitened_periodogram(d, axis)
     if p is None:
         return None
+    if isinstance(p, NotApplicable):
+        raise p
     p = p[1:]
-    return float(p.max() / np.median(p))
+    return _ratio(p.max(), np.median(p), "the median of the whitened periodogram")
 
 
 def row_spectrum_peak(d):
@@ -359,7 +410,7 @@ def col_fpn_excess(d: CaptureData):
         return None
     (ca, va, h), (cb, vb, _) = prof
     cov = float(np.mean((ca - ca.mean()) * (cb - cb.mean())))
-    return cov / (0.5 * (va + vb) / h)
+    return _ratio(cov, 0.5 * (va + vb) / h, "the variance of the even/odd-frame mean maps")
 
 
 def dsnu_excess(d: CaptureData):
@@ -368,7 +419,7 @@ def dsnu_excess(d: CaptureData):
         return None
     m, vt, n = dm
     r = remove_profiles(m)
-    return float(robust_sigma(r) ** 2 / (vt / n))
+    return _ratio(robust_sigma(r) ** 2, vt / n, "the dark temporal variance")
 
 
 def hot_pixel_mask(d: CaptureData) -> np.ndarray | None:
@@ -408,6 +459,9 @@ def _fixed_cov(frames: np.ndarray) -> list[float] | None:
         pa, pb = a[dy::2, dx::2], b[dy::2, dx::2]
         ok = (np.abs(pa - np.median(pa)) < 6 * robust_sigma(pa)) & (np.abs(pb - np.median(pb)) < 6 * robust_sigma(pb))
         pa, pb = pa[ok], pb[ok]
+        if pa.size < 2:
+            raise NotApplicable("fewer than 2 pixels of a CFA plane inside 6 robust sigma of the even/odd-frame "
+                                "mean maps (constant or quantisation-dominated maps)")
         out.append(float(np.mean((pa - pa.mean()) * (pb - pb.mean()))))
     return out
 
@@ -437,7 +491,9 @@ def prnu_excess(d: CaptureData):
             level -= float(np.mean(dm[0][dy::2, dx::2]))
         elif d.black_dn is not None:
             level -= float(np.asarray(d.black_dn, dtype=np.float64).reshape(2, 2)[dy, dx])
-        out.append((cf[k] - base) / max(level, 1e-9) ** 2)
+        if level <= 0:
+            raise NotApplicable(f"the flat's signal above the dark level is {level:.3g} DN on plane {k}")
+        out.append((cf[k] - base) / level ** 2)
     return float(np.mean(out))
 
 
@@ -457,7 +513,7 @@ def frame_mean_jitter(d: CaptureData):
     vals = []
     for f in d.flats:
         means = f.astype(np.float64).mean(axis=(1, 2))
-        vals.append(np.var(means, ddof=1) / (means.mean() - ref) ** 2)
+        vals.append(_ratio(np.var(means, ddof=1), (means.mean() - ref) ** 2, "the flat's squared signal above dark"))
     return float(np.mean(vals))
 
 
@@ -485,6 +541,8 @@ def dark_tail_mass(d):
         return None
     q25, q75 = np.percentile(x, [25, 75])
     s = (q75 - q25) / 1.349
+    if s <= 0:
+        raise NotApplicable("the dark residuals' interquartile range is 0 (quantisation-dominated darks)")
     return float(np.mean(np.abs(x - np.median(x)) > 4 * s))
 
 
@@ -523,7 +581,11 @@ def ppcc_lambda(x: np.ndarray) -> float:
 
 def dark_ppcc_lambda(d):
     x = dark_residual_sample(d, 4000)
-    return None if x is None else ppcc_lambda(x)
+    if x is None:
+        return None
+    if np.ptp(x) <= 0 or np.unique(x[:4000]).size < 8:
+        raise NotApplicable("the dark residuals take fewer than 8 distinct values (quantisation-dominated darks)")
+    return ppcc_lambda(x)
 
 
 def code_occupancy(d: CaptureData):
@@ -552,6 +614,10 @@ def _lag_corr(d: CaptureData, lag: int):
         for dy, dx in PLANE_OFFSETS:
             p = r[:, dy::2, dx::2]
             den = np.mean(p * p)
+            if den <= 0:
+                raise NotApplicable("the dark residual's variance on a CFA plane is 0 (quantisation-dominated darks)")
+            if p.shape[1] <= lag or p.shape[2] <= lag:
+                raise NotApplicable(f"a CFA plane is narrower than {lag + 1} pixels")
             vals.append(np.mean(p[:, :, lag:] * p[:, :, :-lag]) / den)
             vals.append(np.mean(p[:, lag:, :] * p[:, :-lag, :]) / den)
     d.cache[key] = float(np.mean(vals))
@@ -587,9 +653,32 @@ def resolution(name: str, d: CaptureData) -> float:
     return 1e-12
 
 
-def compute_all(d: CaptureData, names=DIAGNOSTICS) -> dict:
-    """{name: value or None (not applicable)}."""
-    return {n: STATISTICS[n](d) for n in names}
+def statistic(name: str, d: CaptureData) -> tuple[float | None, str | None]:
+    """(value, None), or (None, reason) when the statistic is not applicable: the capture set lacks what
+    it needs (:data:`NEEDS`), it is undefined on the data (:class:`NotApplicable`: a zero variance of
+    quantised darks, constant lines), or numerically undefined (a non-finite value)."""
+    try:
+        with np.errstate(all="ignore"):
+            v = STATISTICS[name](d)
+    except NotApplicable as exc:
+        return None, str(exc)
+    except (ZeroDivisionError, FloatingPointError, np.linalg.LinAlgError) as exc:
+        return None, f"undefined on these data ({type(exc).__name__}: {exc})"
+    if v is None:
+        return None, NEEDS[name]
+    if not np.isfinite(v):
+        return None, f"undefined on these data (value {v})"
+    return float(v), None
+
+
+def compute_all(d: CaptureData, names=DIAGNOSTICS, reasons: dict | None = None) -> dict:
+    """{name: value or None (not applicable)}; the reason of each None goes into ``reasons`` when given."""
+    out = {}
+    for n in names:
+        out[n], why = statistic(n, d)
+        if why is not None and reasons is not None:
+            reasons[n] = why
+    return out
 
 
 @dataclass

@@ -38,15 +38,21 @@ def base_fit(d: dg.CaptureData) -> LoopModel:
         else:
             K, v0 = np.polyfit(X.ravel() - (np.mean(d.black_dn) if black_declared else 0.0), Y.ravel(), 1)
             K, v0 = float(K), float(max(v0, 0.1))
-    else:  # scenes only: binned per-pixel temporal variance vs clean level
+    elif d.scenes:  # scenes only: binned per-pixel temporal variance vs clean level
         K, v0 = _scene_ptc(d)
+    else:  # darks only: no signal, no gain to measure (K = 0: no shot noise in the model)
+        K = 0.0
     if black_declared:
         black = np.asarray(d.black_dn, dtype=np.float64).reshape(2, 2)
     elif mu0 is not None:
         black = np.asarray(mu0).reshape(2, 2)
     else:
         black = np.zeros((2, 2))
-    m = LoopModel(cfa=d.cfa, black_dn=black, white_dn=d.white_dn, K=max(K, 1e-6), read_dn=1.0,
+    if not np.isfinite(K) or K <= 0:  # no (or negative) shot-noise slope: the data show no photon noise
+        K = 0.0
+    if v0 is None or not np.isfinite(v0):
+        v0 = 0.0
+    m = LoopModel(cfa=d.cfa, black_dn=black, white_dn=d.white_dn, K=float(K), read_dn=1.0,
                   var_dark_dn2=v0, black_declared=black_declared)
     m.refit_read()
     return m

@@ -68,6 +68,7 @@ class GroupResult:
     plots: dict = field(default_factory=dict)
     heldout_base: dict = field(default_factory=dict)
     heldout_final: dict = field(default_factory=dict)
+    not_applicable: dict = field(default_factory=dict)  # diagnostic -> reason
 
 
 def _crop(frames: np.ndarray, size: int) -> np.ndarray:
@@ -201,7 +202,9 @@ class Loop:
 
     def __init__(self, group: Group, cfg: LoopConfig, iso: int):
         self.g, self.cfg, self.iso = group, cfg, iso
-        self.data_stats = dg.compute_all(group.fit_data)
+        #: diagnostic -> why it is not applicable (on the data, or on the simulated captures)
+        self.not_applicable: dict[str, str] = {}
+        self.data_stats = dg.compute_all(group.fit_data, reasons=self.not_applicable)
         self.held_stats = dg.compute_all(group.held_data)
         self.applicable = [k for k, v in self.data_stats.items() if v is not None]
         self._eval_counter = 0
@@ -219,6 +222,11 @@ class Loop:
         discs = []
         for name in self.applicable:
             vals = [s[name] for s in sim_stats]
+            undefined = sum(v is None for v in vals)
+            if undefined:  # defined on the data, not on (some) simulated captures: no null to compare with
+                self.not_applicable[name] = (f"undefined on {undefined} of {len(vals)} simulated captures of the "
+                                             "current model (no bootstrap null)")
+                continue
             discs.append(dg.discrepancy(name, self.data_stats[name], vals, dg.resolution(name, self.g.fit_data)))
         return dg.holm(discs, self.cfg.alpha), sim_stats
 
@@ -298,7 +306,7 @@ class Loop:
                 continue
             cand = fit_effect(effect, chosen.name, self.g.fit_data, model, ctx)
             new_discs, new_sims = self.evaluate(cand, tag)
-            after = next(d for d in new_discs if d.name == chosen.name)
+            after = next((d for d in new_discs if d.name == chosen.name), None)
             held_after = self.heldout(cand, tag, (chosen.name,))
             hb = held_before.get(chosen.name)
             ha = held_after.get(chosen.name)
@@ -308,8 +316,8 @@ class Loop:
             accepted = bool(diag_better and kl_ok and not null_fit)
             rec = {
                 "effect": effect, "parameters": {k: v for k, v in cand.effects[effect].items()},
-                "diagnostic": chosen.name, "discrepancy_before": chosen.z, "discrepancy_after": after.z,
-                "p_before": chosen.p, "p_after": after.p,
+                "diagnostic": chosen.name, "discrepancy_before": chosen.z, "discrepancy_after": None if after is None else after.z,
+                "p_before": chosen.p, "p_after": None if after is None else after.p,
                 "heldout": {"kl_before": held_before["kl"], "kl_after": held_after["kl"],
                             "kl_excess_before": held_before["kl_excess"], "kl_excess_after": held_after["kl_excess"],
                             "kl_structured_before": held_before["kl_structured"],
@@ -346,6 +354,7 @@ class Loop:
         last = {u["diagnostic"]: u for u in res.unexplained}  # latest reason per diagnostic
         res.unexplained = [dict(u, discrepancy=final_sig[name].z) for name, u in last.items() if name in final_sig]
         res.plots["final_sims"] = sims
+        res.not_applicable = {k: self.not_applicable[k] for k in dg.DIAGNOSTICS if k in self.not_applicable}
         return res
 
 

@@ -133,9 +133,16 @@ def emva1288_mono(seqs: list[Sequence]) -> dict | None:
         elif s2_y[i] < max_ and s2_y[abs(i - 1)] < max_:
             break
     Y = u_y - u_yd
-    imax = int(np.max(np.argwhere(Y <= 0.7 * Y[isat])))
+    below = np.argwhere(Y <= 0.7 * Y[isat])
+    if Y[isat] <= 0 or below.size == 0:  # no signal above dark at the saturation point: no gain to fit
+        return None
+    imax = int(np.max(below))
     sl = slice(0, imax + 1)
+    if not np.any(Y[sl] != 0):
+        return None
     K = _linear_b0(Y[sl], (s2_y - s2_yd)[sl])
+    if not np.isfinite(K) or K <= 0:
+        return None
     if len(texp) <= 2:
         s2_dark = float(s2_yd_all[0])
     else:

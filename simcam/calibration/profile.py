@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..noise.poisson_gaussian import LAMBDA_MAX
 from .model import LoopModel, tukey_var
 
 SIGNAL_ORDER = ("prnu", "channel_gain", "frame_flicker")
@@ -83,6 +84,9 @@ def noise_entry(model: LoopModel) -> tuple[dict, list[str]]:
             effects.append({"type": "quantization", "range_dn": float(fs), "step_dn": float(p["step_dn"]),
                             "offset_dn": float(np.mean(model.black_dn))})
     base = {"type": "poisson_gaussian", "beta1": beta1, "beta2": beta2}
+    if float(np.min(beta1)) * LAMBDA_MAX <= 1.0:  # no shot noise measured, or > 2^22 e- at white: Gaussian NLF
+        base = {"type": "nlf", "beta1": beta1, "beta2": beta2}
+        notes.append("gain not measurable or below the Poisson sampler's range: Gaussian NLF base (same variance)")
     if not effects:
         return base, notes
     return {"type": "composite", "base": base, "effects": effects}, notes

@@ -31,6 +31,12 @@ REPORT_SCHEMA = "simcam-loop-report/1"
 PROFILE_SCHEMA = 1
 
 
+def iso_label(iso: int) -> str:
+    """The ISO as the data give it: "ISO 800", or "ISO not given" (EMVA 1288 descriptors, raw arrays
+    without the tag; stored as 0)."""
+    return f"ISO {int(iso)}" if iso and iso > 0 else "ISO not given"
+
+
 def _disc_dict(d: dg.Discrepancy) -> dict:
     return {"name": d.name, "effect": dg.DIAGNOSTIC_EFFECT[d.name], "value": d.value, "sim_mean": d.sim_mean,
             "sim_sd": d.sim_sd, "discrepancy": d.z, "p": d.p, "significant": bool(d.significant)}
@@ -64,6 +70,7 @@ def build_report(results: list[GroupResult], capture, cfg: LoopConfig, emva: dic
     for r in results:
         isos.append({
             "iso": int(r.iso),
+            "iso_label": iso_label(r.iso),
             "iterations": [{k: v for k, v in it.items()} for it in r.iterations],
             "effects": list(r.model.effects),
             "unexplained": [{"diagnostic": u["diagnostic"], "discrepancy": u["discrepancy"], "reason": u["reason"]}
@@ -73,6 +80,7 @@ def build_report(results: list[GroupResult], capture, cfg: LoopConfig, emva: dic
             "model": r.model.to_dict(),
             "diagnostics_base": [_disc_dict(d) for d in r.base_disc],
             "diagnostics_final": [_disc_dict(d) for d in r.final],
+            "not_applicable": [{"diagnostic": k, "reason": v} for k, v in r.not_applicable.items()],
             "heldout": {"kl_base": r.heldout_base["kl"], "kl_final": r.heldout_final["kl"],
                         "kl_sampling_floor": r.heldout_final["kl_floor"],
                         "kl_excess_base": r.heldout_base["kl_excess"], "kl_excess_final": r.heldout_final["kl_excess"],
@@ -126,6 +134,7 @@ def loop_model_dict(results: list[GroupResult], capture, camera_id: str | None =
         fs = m.full_scale_dn
         isos.append({
             "iso": int(r.iso),
+            "iso_label": iso_label(r.iso),
             "model": {"type": "poisson_gaussian", "beta1": float(m.K / fs), "beta2": float(m.read_dn ** 2 / fs ** 2)},
             "K_dn_per_e": float(m.K), "read_dn": float(m.read_dn),
             "black_level": [float(x) for x in np.asarray(m.black_dn).ravel()],
@@ -232,7 +241,7 @@ def figures(r: GroupResult, seed: int = 0) -> dict[str, str]:
         ax.plot([], [], "k--", lw=0.8, label="base fit")
         ax.plot([], [], "k-", lw=1.2, label="final model")
         ax.set_ylabel("temporal variance (DN$^2$)")
-        ax.set_title(f"ISO {r.iso}: photon transfer (K = {r.base.K:.4g} → {r.model.K:.4g} DN/e$^-$)")
+        ax.set_title(f"{iso_label(r.iso)}: photon transfer (K = {r.base.K:.4g} → {r.model.K:.4g} DN/e$^-$)")
         ax.legend(fontsize=8)
         axr.axhline(0, color="0.5", lw=0.8)
         axr.set_xlabel("mean signal above dark (DN)")
@@ -367,7 +376,7 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
                      f"<td>{_fmt(e['dsnu_e'])}</td><td>{_fmt(e['prnu_percent'])}</td></tr></table>")
     for g in doc["isos"]:
         iso = g["iso"]
-        parts.append(f"<h2>ISO {iso}</h2><p>Effects added: <b>{', '.join(g['effects']) or 'none'}</b>. "
+        parts.append(f"<h2>{g['iso_label']}</h2><p>Effects added: <b>{', '.join(g['effects']) or 'none'}</b>. "
                      f"Held-out pixel marginal KL {_fmt(g['heldout']['kl_base'])} (base) → {_fmt(g['heldout']['kl_final'])} "
                      f"(final; sampling floor {_fmt(g['heldout']['kl_sampling_floor'])}, excess "
                      f"{_fmt(g['heldout']['kl_excess_base'])} → {_fmt(g['heldout']['kl_excess_final'])}); structured "
@@ -401,13 +410,17 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
         parts.append("<h3>Diagnostics (base → final model)</h3><table><tr><th>diagnostic</th><th>effect</th>"
                      "<th>data</th><th>z base</th><th>z final</th><th>p final</th></tr>")
         fin = {d["name"]: d for d in g["diagnostics_final"]}
+        na = {x["diagnostic"]: x["reason"] for x in g.get("not_applicable", [])}
         for d in g["diagnostics_base"]:
-            f = fin[d["name"]]
+            f = fin.get(d["name"], {"significant": False, "discrepancy": None, "p": None})
             cls = " class=sig" if f["significant"] else ""
             parts.append(f"<tr{cls}><td class=l>{d['name']}</td><td class=l>{d['effect'] or '–'}</td>"
                          f"<td>{_fmt(d['value'])}</td><td>{_fmt(d['discrepancy'])}</td><td>{_fmt(f['discrepancy'])}</td>"
                          f"<td>{_fmt(f['p'])}</td></tr>")
         parts.append("</table>")
+        if na:
+            parts.append("<h3>Not applicable</h3><ul>" + "".join(
+                f"<li>{html.escape(k)}: {html.escape(v)}</li>" for k, v in na.items()) + "</ul>")
         titles = {"ptc": "Photon-transfer curve with fit and residuals", "spectra": "Row / column spectra",
                   "maps": "Temporal-mean maps", "hists": "Residual histograms before / after each added effect"}
         for key, title in titles.items():

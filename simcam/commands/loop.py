@@ -32,7 +32,7 @@ def loop(
     doc = run_and_write(capture_dir, out, start_profile=start_profile, cfg=cfg)
     for g in doc["isos"]:
         un = ", ".join(u["diagnostic"] for u in g["unexplained"]) or "none"
-        typer.echo(f"ISO {g['iso']}: effects {', '.join(g['effects']) or 'none'}; unexplained {un}; "
+        typer.echo(f"{g['iso_label']}: effects {', '.join(g['effects']) or 'none'}; unexplained {un}; "
                    f"held-out KL {g['heldout']['kl_base']:.3g} -> {g['heldout']['kl_final']:.3g}, "
                    f"structured KL {g['heldout']['kl_structured_base']:.3g} -> {g['heldout']['kl_structured_final']:.3g}")
     if doc.get("emva"):
