@@ -46,6 +46,11 @@ class Sequence:
     clean: np.ndarray | None = None
     photons: float | None = None  # EMVA: mean photons per pixel
     source: str = ""
+    #: whole-frame statistics (:class:`FrameSummary`) accumulated while reading; computed from
+    #: ``frames`` on first use when absent
+    summary: "FrameSummary | None" = None
+    #: True when ``frames`` holds only the loop's analysed region (:mod:`simcam.calibration.region`)
+    region_applied: bool = False
 
     @property
     def n(self) -> int:
@@ -53,10 +58,110 @@ class Sequence:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return tuple(self.frames.shape[1:])
+        """Size (H, W) of the whole frame."""
+        return self.stats().shape if self.region_applied else tuple(self.frames.shape[1:])
+
+    def stats(self) -> "FrameSummary":
+        """Whole-frame statistics (streamed at reading time, else from ``frames``)."""
+        if self.summary is None:
+            acc = FrameAccumulator(keep_mean_map=self.kind == "dark")
+            for f in self.frames:
+                acc.add(f, self.white_dn)
+            self.summary = acc.result()
+        return self.summary
 
     def saturated_fraction(self) -> float:
-        return float(np.mean(self.frames >= self.white_dn))
+        return self.stats().saturated_fraction
+
+
+@dataclass
+class FrameSummary:
+    """Whole-frame sufficient statistics of one sequence, per 2x2 CFA site (index 4 = all pixels).
+
+    ``pair_mean`` / ``pair_var``: mean of the first two frames and half the variance of their
+    difference (EMVA 1288 R3.0 eq. 26); ``avg_mean`` / ``avg_var``: mean and spatial variance (ddof 1)
+    of the temporal-mean image; ``temporal_var``: mean over pixels of the per-pixel temporal variance
+    (ddof 1); ``frame_means`` (n,) per-frame means; ``mean_map`` the temporal-mean image (darks only,
+    float32) for the dark-current map.
+    """
+
+    n: int
+    shape: tuple
+    pair_mean: np.ndarray
+    pair_var: np.ndarray
+    avg_mean: np.ndarray
+    avg_var: np.ndarray
+    temporal_var: np.ndarray
+    frame_means: np.ndarray
+    saturated_fraction: float
+    mean_map: np.ndarray | None = None
+
+
+class FrameAccumulator:
+    """One pass over a sequence's frames: per-pixel sums and sums of squares (float64), the first
+    frame for the pair difference; memory two float64 frames and one float32 frame."""
+
+    def __init__(self, keep_mean_map: bool = False):
+        self.n = 0
+        self.keep = keep_mean_map
+        self.s1 = self.s2 = self.first = None
+        self.pair = None
+        self.means: list[float] = []
+        self.sat = 0
+
+    def add(self, frame: np.ndarray, white: float) -> None:
+        f = np.asarray(frame, dtype=np.float64)
+        if self.s1 is None:
+            self.s1, self.s2 = f.copy(), f * f
+            self.first = np.asarray(frame, dtype=np.float32).copy()
+        else:
+            self.s1 += f
+            self.s2 += f * f
+        if self.n == 1:
+            a = self.first.astype(np.float64)
+            d = a - f
+            pv = _site_mean((d - _site_mean(d, full=True)) ** 2) / 2
+            pv[4] = float(np.mean((d - d.mean()) ** 2)) / 2
+            self.pair = ([_site_mean(a + f) / 2], [pv])
+            self.first = None
+        self.means.append(float(f.mean()))
+        self.sat += int(np.count_nonzero(f >= white))
+        self.n += 1
+
+    def result(self) -> "FrameSummary":
+        n = self.n
+        if n < 2:
+            raise DatasetError("a sequence needs >= 2 frames for temporal statistics")
+        avg = self.s1 / n
+        tvar = np.maximum(self.s2 - self.s1 * avg, 0.0) / (n - 1)
+        avg_var = _site_var(avg)
+        return FrameSummary(
+            n=n, shape=tuple(avg.shape), pair_mean=self.pair[0][0], pair_var=self.pair[1][0],
+            avg_mean=_site_mean(avg), avg_var=avg_var, temporal_var=_site_mean(tvar),
+            frame_means=np.asarray(self.means), saturated_fraction=self.sat / float(n * avg.size),
+            mean_map=avg.astype(np.float32) if self.keep else None)
+
+
+def _site_mean(x: np.ndarray, full: bool = False) -> np.ndarray:
+    """Means of the four 2x2 sites and of all pixels (5,), or a (H, W) map of its site means (``full``)."""
+    h, w = x.shape
+    vals = [float(x[dy::2, dx::2].mean()) if h > dy and w > dx else float("nan") for dy, dx in PLANE_OFFSETS]
+    if full:
+        out = np.empty_like(x)
+        for v, (dy, dx) in zip(vals, PLANE_OFFSETS):
+            out[dy::2, dx::2] = v
+        return out
+    return np.array(vals + [float(x.mean())])
+
+
+def _site_var(x: np.ndarray) -> np.ndarray:
+    h, w = x.shape
+    vals = [float(np.var(x[dy::2, dx::2], ddof=1)) if x[dy::2, dx::2].size > 1 else float("nan")
+            for dy, dx in PLANE_OFFSETS]
+    return np.array(vals + [float(np.var(x, ddof=1))])
+
+
+PLANE_OFFSETS = ((0, 0), (0, 1), (1, 0), (1, 1))
 
 
 @dataclass
@@ -75,13 +180,46 @@ class CaptureSet:
         return [s for s in self.sequences if s.iso == iso]
 
 
+class _SequenceBuilder:
+    """Frames of one sequence as they are read: whole-frame statistics accumulated, only the loop's
+    analysed region kept (all of the frame when ``region`` is None)."""
+
+    def __init__(self, kind: str, white: float, region=None):
+        self.acc = FrameAccumulator(keep_mean_map=kind == "dark")
+        self.white, self.region, self.plan = white, region, None
+        self.kept: list[np.ndarray] = []
+
+    def add(self, frame: np.ndarray) -> None:
+        self.acc.add(frame, self.white)
+        if self.region is not None:
+            if self.plan is None:
+                self.plan = self.region.plan(*frame.shape)
+            frame = np.ascontiguousarray(self.region.extract(frame, self.plan))
+        self.kept.append(np.asarray(frame, dtype=np.float32))
+
+    def finish(self) -> tuple[np.ndarray, "FrameSummary"]:
+        return np.stack(self.kept), self.acc.result()
+
+
+def _progress(total: int, desc: str, enabled: bool | None):
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc=desc, unit="frame", disable=enabled is False, leave=False)
+
+
 def sequence_kind(name: str) -> str:
     low = name.lower()
     return "dark" if low.startswith("dark") else "flat" if low.startswith("flat") else "scene"
 
 
-def read_capture_set(path: str | Path, *, check_saturation: bool = True) -> CaptureSet:
-    """Read a capture-set directory or an EMVA 1288 descriptor file.
+def read_capture_set(path: str | Path, *, check_saturation: bool = True, region=None,
+                     progress: bool | None = None) -> CaptureSet:
+    """Read a capture-set directory or an EMVA 1288 descriptor file, one frame at a time.
+
+    Every frame goes through the sequence's whole-frame accumulators (:class:`FrameSummary`);
+    with a ``region`` (:class:`simcam.calibration.region.Region`) only its pixels are kept in
+    memory (``Sequence.frames``), else whole frames. ``progress``: a progress bar over the frames
+    (None: when the output is a terminal).
 
     Raises
     ------
@@ -93,13 +231,16 @@ def read_capture_set(path: str | Path, *, check_saturation: bool = True) -> Capt
     if not path.exists():
         raise DatasetError(f"{path}: capture set not found; expected a directory of sequences or an EMVA 1288 descriptor")
     if path.is_file():
-        return read_emva1288(path)
+        return read_emva1288(path, region=region, progress=progress)
     descriptors = sorted(path.glob("EMVA1288*.txt"))
     if descriptors:
-        return read_emva1288(descriptors[0])
+        return read_emva1288(descriptors[0], region=region, progress=progress)
     seqs = []
-    for d in sorted(p for p in path.iterdir() if p.is_dir()):
-        seqs.append(_read_sequence_dir(d))
+    dirs = sorted(p for p in path.iterdir() if p.is_dir())
+    total = sum(len(_frame_files(d)) for d in dirs if not _is_sidd(d))
+    with _progress(total, "reading frames", progress) as bar:
+        for d in dirs:
+            seqs.append(_read_sequence_dir(d, region, bar))
     if not seqs:
         raise DatasetError(f"{path}: no sequence sub-directories; expected dark*/, flat*/ or scene directories of frames")
     cs = CaptureSet(str(path), "directory", seqs)
@@ -113,10 +254,14 @@ def _frame_files(d: Path) -> list[Path]:
     return files
 
 
-def _read_sequence_dir(d: Path) -> Sequence:
+def _is_sidd(d: Path) -> bool:
+    return any(p.name.upper().find("NOISY_RAW") >= 0 and p.suffix.upper() == ".MAT" for p in d.iterdir())
+
+
+def _read_sequence_dir(d: Path, region=None, bar=None) -> Sequence:
     import yaml
 
-    if any(p.name.upper().find("NOISY_RAW") >= 0 and p.suffix.upper() == ".MAT" for p in d.iterdir()):
+    if _is_sidd(d):
         return _read_sidd_dir(d)
     files = _frame_files(d)
     if not files:
@@ -124,12 +269,12 @@ def _read_sequence_dir(d: Path) -> Sequence:
     side = {}
     if (d / "sequence.yaml").exists():
         side = yaml.safe_load((d / "sequence.yaml").read_text()) or {}
-    frames, metas = [], []
+    first_shape, metas, builder = None, [], None
     for f in files:
         arr, meta = _read_frame(f, side)
-        if frames and arr.shape != frames[0].shape:
+        if first_shape is not None and arr.shape != first_shape:
             raise DatasetError(f"{f}: frame size {arr.shape[1]}x{arr.shape[0]} differs from {files[0].name} "
-                               f"({frames[0].shape[1]}x{frames[0].shape[0]}); expected one size per sequence")
+                               f"({first_shape[1]}x{first_shape[0]}); expected one size per sequence")
         if metas and meta["cfa"] != metas[0]["cfa"]:
             raise DatasetError(f"{f}: cfa {meta['cfa']!r} differs from {files[0].name} ({metas[0]['cfa']!r}); "
                                "expected one CFA pattern per sequence")
@@ -138,9 +283,14 @@ def _read_sequence_dir(d: Path) -> Sequence:
                     not np.isclose(meta[key], metas[0][key], rtol=1e-6):
                 raise DatasetError(f"{f}: {key} {meta[key]} differs from {files[0].name} ({metas[0][key]}); "
                                    "expected fixed settings within a sequence")
-        frames.append(arr)
+        if builder is None:
+            first_shape = arr.shape
+            builder = _SequenceBuilder(sequence_kind(d.name), float(meta["white"]), region)
+        builder.add(arr)
         metas.append(meta)
-    if len(frames) < 2:
+        if bar is not None:
+            bar.update(1)
+    if len(metas) < 2:
         raise DatasetError(f"{d}: sequence has 1 frame; expected >= 2 frames of the same scene "
                            "(temporal variance needs frame pairs)")
     m = metas[0]
@@ -148,14 +298,18 @@ def _read_sequence_dir(d: Path) -> Sequence:
     for cname in ("clean.npy", "clean.dng"):
         if (d / cname).exists():
             clean, _ = _read_frame(d / cname, side)
-            if clean.shape != frames[0].shape:
+            if clean.shape != first_shape:
                 raise DatasetError(f"{d / cname}: clean reference size {clean.shape} differs from the frames "
-                                   f"{frames[0].shape}; expected the same size")
+                                   f"{first_shape}; expected the same size")
+            if region is not None:
+                clean = np.ascontiguousarray(region.extract(clean, builder.plan))
             break
+    frames, summary = builder.finish()
     return Sequence(
-        name=d.name, kind=sequence_kind(d.name), frames=np.stack(frames).astype(np.float32),
+        name=d.name, kind=sequence_kind(d.name), frames=frames,
         iso=int(round(m["iso"])) if m["iso"] is not None else 0, exposure_s=m["exposure_s"], cfa=m["cfa"],
-        black_dn=m["black"], white_dn=float(m["white"]), clean=clean, source=str(d),
+        black_dn=m["black"], white_dn=float(m["white"]), clean=clean, source=str(d), summary=summary,
+        region_applied=region is not None,
     )
 
 
@@ -259,7 +413,7 @@ def _check_set(cs: CaptureSet, check_saturation: bool) -> None:
                                    "shorten the exposure or remove the sequence")
 
 
-def read_emva1288(descriptor: str | Path) -> CaptureSet:
+def read_emva1288(descriptor: str | Path, *, region=None, progress: bool | None = None) -> CaptureSet:
     """Read an EMVA 1288 descriptor (R3.0 format) into dark and flat sequences.
 
     Each ``b``/``d`` block becomes one sequence (``flat_NNN`` / ``dark_NNN``) in
@@ -278,9 +432,9 @@ def read_emva1288(descriptor: str | Path) -> CaptureSet:
             if tag == "n":
                 bits, width, height = int(parts[1]), int(parts[2]), int(parts[3])
             elif tag == "b":
-                blocks.append({"kind": "flat", "exp_ns": float(parts[1]), "photons": float(parts[2]), "files": []})
+                blocks.append({"kind": "flat", "exp_ns": float(parts[1].replace(",", ".")), "photons": float(parts[2].replace(",", ".")), "files": []})
             elif tag == "d":
-                blocks.append({"kind": "dark", "exp_ns": float(parts[1]), "photons": 0.0, "files": []})
+                blocks.append({"kind": "dark", "exp_ns": float(parts[1].replace(",", ".")), "photons": 0.0, "files": []})
             elif tag == "i":
                 if not blocks:
                     raise DatasetError(f"{descriptor}:{lineno}: image line before any 'b' or 'd' line")
@@ -296,19 +450,25 @@ def read_emva1288(descriptor: str | Path) -> CaptureSet:
         raise DatasetError(f"{descriptor}: no 'n bits width height' line; expected an EMVA 1288 descriptor")
     seqs = []
     counters = {"flat": 0, "dark": 0}
-    for b in blocks:
-        frames = np.stack([_read_png(f, (height, width)) for f in b["files"]]) if b["files"] else None
-        name = f"{b['kind']}_{counters[b['kind']]:03d}"
-        counters[b["kind"]] += 1
-        if frames is None or frames.shape[0] < 2:
-            raise DatasetError(f"{descriptor}: block {name} (exposure {b['exp_ns']:g} ns) has "
-                               f"{0 if frames is None else frames.shape[0]} image(s); expected >= 2")
-        seqs.append(Sequence(name=name, kind=b["kind"], frames=frames, iso=0, exposure_s=b["exp_ns"] * 1e-9,
-                             cfa=None, black_dn=None, white_dn=float(2 ** bits - 1), photons=b["photons"],
-                             source=f"{descriptor}:{name}"))
+    white = float(2 ** bits - 1)
+    with _progress(sum(len(b["files"]) for b in blocks), "reading frames", progress) as bar:
+        for b in blocks:
+            name = f"{b['kind']}_{counters[b['kind']]:03d}"
+            counters[b["kind"]] += 1
+            if len(b["files"]) < 2:
+                raise DatasetError(f"{descriptor}: block {name} (exposure {b['exp_ns']:g} ns) has "
+                                   f"{len(b['files'])} image(s); expected >= 2")
+            builder = _SequenceBuilder(b["kind"], white, region)
+            for f in b["files"]:
+                builder.add(_read_png(f, (height, width)))
+                bar.update(1)
+            frames, summary = builder.finish()
+            seqs.append(Sequence(name=name, kind=b["kind"], frames=frames, iso=0, exposure_s=b["exp_ns"] * 1e-9,
+                                 cfa=None, black_dn=None, white_dn=white, photons=b["photons"],
+                                 source=f"{descriptor}:{name}", summary=summary, region_applied=region is not None))
     cs = CaptureSet(str(descriptor), "emva1288", seqs,
                     notes=["EMVA 1288 descriptor: monochrome, no declared black level (black taken from the darks), "
-                           "ISO unknown (reported as 0)"])
+                           "ISO not given"])
     return cs
 
 

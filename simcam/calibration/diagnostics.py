@@ -158,8 +158,10 @@ class CaptureData:
     def temporal_residuals(self, which: str) -> list[np.ndarray]:
         """Frame minus per-pixel sequence mean, scaled by sqrt(n/(n-1)) (unit-variance preserving)."""
         key = ("res", which)
+        if which == "all":  # the dark and flat residuals, not a second copy
+            return self.temporal_residuals("dark") + self.temporal_residuals("flat")
         if key not in self.cache:
-            seqs = self.darks if which == "dark" else self.flats if which == "flat" else self.darks + self.flats
+            seqs = self.darks if which == "dark" else self.flats
             out = []
             for f in seqs:
                 f64 = f.astype(np.float64)

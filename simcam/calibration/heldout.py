@@ -196,6 +196,47 @@ def group_values(residuals: list[np.ndarray], fixed: list[bool], scales: list[np
     return vals, scales
 
 
+class StructuredKL:
+    """:func:`structured_kl` one replicate at a time: the data's values, scales and bin edges are fixed
+    at construction; :meth:`add` histograms one simulated replicate (its frames can then be freed)."""
+
+    def __init__(self, real: list[np.ndarray], fixed: list[bool]):
+        self.fixed = fixed
+        dvals, self.scales = group_values(real, fixed)
+        self.fams = {}  # family -> list of (weight, edges, data counts, per-replicate model counts), ntot
+        for fam in FAMILIES:
+            groups = dvals[fam]
+            if not groups:
+                continue
+            hists = []
+            if fam == "pixel":  # joint law of (group, value): group-weighted mean of per-group KLs
+                ntot = sum(g.size for g in groups)
+                for gi, g in enumerate(groups):
+                    edges = data_edges(g)
+                    if edges is not None:
+                        hists.append((g.size / ntot, edges, np.histogram(g, edges)[0], [], gi))
+            else:  # groups pooled (values standardised per group)
+                x = np.concatenate(groups)
+                ntot = x.size
+                edges = data_edges(x)
+                if edges is not None:
+                    hists.append((1.0, edges, np.histogram(x, edges)[0], [], None))
+            if hists:
+                self.fams[fam] = (hists, ntot)
+
+    def add(self, sim: list[np.ndarray]) -> None:
+        mv = group_values(sim, self.fixed, self.scales)[0]
+        for fam, (hists, _n) in self.fams.items():
+            for _w, edges, _nc, mcs, gi in hists:
+                x = mv[fam][gi] if gi is not None else np.concatenate(mv[fam])
+                mcs.append(np.histogram(x, edges)[0])
+
+    def result(self) -> dict:
+        fams = {fam: _family([(w, nc, mcs) for w, _e, nc, mcs, _g in hists], ntot)
+                for fam, (hists, ntot) in self.fams.items()}
+        return {"kl": float(sum(f["excess"] for f in fams.values() if f["significant"])), "families": fams}
+
+
 def structured_kl(real: list[np.ndarray], fixed: list[bool], sims: list[list[np.ndarray]]) -> dict:
     """Structured marginal KL of held-out noise (module docstring).
 
@@ -204,33 +245,10 @@ def structured_kl(real: list[np.ndarray], fixed: list[bool], sims: list[list[np.
     the model. Returns ``{"kl": sum of the significant excesses, "families": {name: {"kl", "floor",
     "floor_iid", "sd", "excess", "z", "significant", "n"}}}``.
     """
-    dvals, scales = group_values(real, fixed)
-    mvals = [group_values(s, fixed, scales)[0] for s in sims]
-    fams = {}
-    for fam in FAMILIES:
-        groups = dvals[fam]
-        if not groups:
-            continue
-        # (weight, data counts, per-replicate model counts) per histogram of the family
-        hists = []
-        if fam == "pixel":  # joint law of (group, value): group-weighted mean of per-group KLs
-            ntot = sum(g.size for g in groups)
-            for gi, g in enumerate(groups):
-                edges = data_edges(g)
-                if edges is not None:
-                    hists.append((g.size / ntot, np.histogram(g, edges)[0],
-                                  [np.histogram(mv[fam][gi], edges)[0] for mv in mvals]))
-        else:  # groups pooled (values standardised per group)
-            x = np.concatenate(groups)
-            ntot = x.size
-            edges = data_edges(x)
-            if edges is not None:
-                hists.append((1.0, np.histogram(x, edges)[0],
-                              [np.histogram(np.concatenate(mv[fam]), edges)[0] for mv in mvals]))
-        if not hists:
-            continue
-        fams[fam] = _family(hists, ntot)
-    return {"kl": float(sum(f["excess"] for f in fams.values() if f["significant"])), "families": fams}
+    acc = StructuredKL(real, fixed)
+    for s in sims:
+        acc.add(s)
+    return acc.result()
 
 
 def _family(hists: list, n: int) -> dict:

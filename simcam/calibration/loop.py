@@ -21,7 +21,7 @@ Per ISO group of a capture set:
    before and after. The structured KL is reported, not used in decisions.
 5. The effect is kept if the held-out discrepancy of its diagnostic shrinks and
    the held-out KL does not grow (beyond ``kl_tolerance`` relative plus twice
-   the KL's sampling floor, :func:`kl_sampling_floor`); otherwise the
+   the KL's sampling floor, :func:`simcam.calibration.heldout.kl_floor`); otherwise the
    diagnostic is left out of the choice until another effect is accepted (an
    effect can hurt the marginal while a bigger one is still missing), and is
    reported ``unexplained`` if it is still significant at the end. A
@@ -40,8 +40,9 @@ from ..errors import DatasetError
 from . import diagnostics as dg
 from .capture import CaptureSet, Sequence
 from .effects import base_fit, ctx_like, fit_effect
-from .heldout import KL_BINNING, KL_EDGES, STRUCTURED_BINNING, kl_sampling_floor, marginal_kl, structured_kl  # noqa: F401
+from .heldout import KL_EDGES, StructuredKL, kl_counts, kl_floor
 from .model import LoopModel, SimSpec, marginal_variance, site_map
+from .region import DEFAULT_MAX_PIXELS, DEFAULT_TILE, Region
 from .simulate import simulate_capture
 
 @dataclass
@@ -51,7 +52,13 @@ class LoopConfig:
     alpha: float = 0.01
     max_iterations: int = 10
     seed: int = 0
-    max_size: int = 128  # centre crop (pixels per side) used by the loop
+    max_size: int | None = None  # centre crop (pixels per side) instead of the whole frame / tile mosaic
+    max_pixels: int = DEFAULT_MAX_PIXELS  # pixels analysed per frame (whole frame up to this, else a tile mosaic)
+    tile: int = DEFAULT_TILE
+    progress: bool | None = None  # progress bars (None: when the output is a terminal)
+
+    def region(self) -> Region:
+        return Region(max_pixels=self.max_pixels, tile=self.tile, max_size=self.max_size)
     kl_tolerance: float = 0.10  # relative growth of held-out KL still accepted (plus twice its sampling floor)
 
 
@@ -71,13 +78,23 @@ class GroupResult:
     not_applicable: dict = field(default_factory=dict)  # diagnostic -> reason
 
 
-def _crop(frames: np.ndarray, size: int) -> np.ndarray:
-    h, w = frames.shape[-2:]
-    ch, cw = min(h, size), min(w, size)
-    ch, cw = ch - ch % 2, cw - cw % 2
-    y0 = ((h - ch) // 2) // 2 * 2
-    x0 = ((w - cw) // 2) // 2 * 2
-    return frames[..., y0:y0 + ch, x0:x0 + cw]
+def _t(s: Sequence) -> float:
+    return float(s.exposure_s) if s.exposure_s is not None else -1.0
+
+
+def _fmt_s(t: float) -> str:
+    return "exposure time not given" if t < 0 else f"{t:.4g} s"
+
+
+def dark_exposure(darks: list[Sequence]) -> float | None:
+    """The exposure time (s; -1 when not given) whose dark sequences hold the most frames (ties: the
+    shortest); None without darks."""
+    if not darks:
+        return None
+    frames: dict[float, int] = {}
+    for s in darks:
+        frames[_t(s)] = frames.get(_t(s), 0) + s.n
+    return max(sorted(frames), key=lambda t: frames[t])
 
 
 class Group:
@@ -92,13 +109,27 @@ class Group:
             self.seqs.append(s)
         if not self.seqs:
             raise DatasetError(f"ISO {seqs[0].iso}: no usable sequence left (all saturated)")
+        self.dark_exposure_s = None
+        darks = [s for s in self.seqs if s.kind == "dark"]
+        t_dark = dark_exposure(darks)
+        if t_dark is not None:
+            self.dark_exposure_s = t_dark
+            other = sorted({_t(s) for s in darks} - {t_dark})
+            if other:
+                self.seqs = [s for s in self.seqs if s.kind != "dark" or _t(s) == t_dark]
+                notes.append(f"darks at {_fmt_s(t_dark)} used by the loop (the exposure time with the most dark "
+                             f"frames); darks at {', '.join(_fmt_s(t) for t in other)} only in the dark-current fit "
+                             "(dark sequences of different exposure times are not pooled)")
         r0 = self.seqs[0]
         self.cfa, self.white = r0.cfa, r0.white_dn
         self.black = r0.black_dn
         self.fit, self.held = [], []
+        region = cfg.region()
+        h, w = r0.shape
+        self.region = region.describe(h, w)
         for s in self.seqs:
-            f = _crop(s.frames, cfg.max_size)
-            clean = None if s.clean is None else _crop(s.clean, cfg.max_size)
+            f = s.frames if s.region_applied else region.extract(s.frames)
+            clean = None if s.clean is None or s.region_applied else region.extract(s.clean)
             if s.n >= 4:
                 k = (s.n + 1) // 2
                 self.fit.append((s, f[:k], clean))
@@ -133,6 +164,15 @@ class Group:
                 sig = ref - base
             out.append(SimSpec(s.kind, f.shape[0], sig, fixed_in_clean=(s.kind == "scene" and clean is None)))
         return out
+
+
+#: values of held-out noise kept per histogram of the report's figures
+PLOT_VALUES = 200_000
+
+
+def _thin(x: np.ndarray, n: int = PLOT_VALUES) -> np.ndarray:
+    """Every k-th value of ``x`` so that at most ``n`` remain (for the report's histograms)."""
+    return x[:: max(1, -(-x.size // n))].copy()
 
 
 def _capture(group: Group, part, sims, specs) -> dg.CaptureData:
@@ -209,6 +249,13 @@ class Loop:
         self.applicable = [k for k, v in self.data_stats.items() if v is not None]
         self._eval_counter = 0
 
+    def _bar(self, n: int, what: str):
+        from tqdm.auto import tqdm
+
+        label = f"ISO {self.iso}" if self.iso > 0 else "ISO not given"
+        return tqdm(range(n), desc=f"{label}: {what}", unit="capture", leave=False,
+                    disable=self.cfg.progress is False)
+
     def _rng(self, *tag):
         return np.random.default_rng([self.cfg.seed, self.iso, *tag])
 
@@ -216,7 +263,7 @@ class Loop:
         """Discrepancies on the fit frames (Holm-marked) and the simulated statistics."""
         specs = self.g.specs(model, self.g.fit)
         sim_stats = []
-        for r in range(self.cfg.replicates):
+        for r in self._bar(self.cfg.replicates, f"bootstrap {tag}"):
             sims = simulate_capture(model, specs, self._rng(1, tag, r))
             sim_stats.append(dg.compute_all(_capture(self.g, self.g.fit, sims, specs), self.applicable))
         discs = []
@@ -234,21 +281,32 @@ class Loop:
         specs = self.g.specs(model, self.g.held)
         real_f = noise_frames(self.g.held, [f for _, f, _ in self.g.held], specs, model)
         real = np.concatenate([x.ravel() for x in real_f])
-        sim_noise, sim_frames, sim_stats = [], [], []
-        for r in range(self.cfg.heldout_replicates):
+        n_counts = np.histogram(real, KL_EDGES)[0]
+        m_counts = np.zeros_like(n_counts)
+        m_size = 0
+        plot_noise, plot_size = [], 0  # the first replicates' values, up to twice the data's count
+        sim_stats = []
+        st_acc = StructuredKL(real_f, [sp.fixed_in_clean for sp in specs])
+        for r in self._bar(self.cfg.heldout_replicates, f"held-out {tag}"):
             sims = simulate_capture(model, specs, self._rng(2, tag, r))
             nf = noise_frames(self.g.held, sims, specs, model)
-            sim_frames.append(nf)
-            sim_noise.append(np.concatenate([x.ravel() for x in nf]))
+            st_acc.add(nf)
+            for x in nf:
+                m_counts += np.histogram(x, KL_EDGES)[0]
+                m_size += x.size
+                if plot_size < 2 * real.size:
+                    take = x.ravel()[: 2 * real.size - plot_size]
+                    plot_noise.append(take)
+                    plot_size += take.size
             if diagnostics:
                 sim_stats.append(dg.compute_all(_capture(self.g, self.g.held, sims, specs), diagnostics))
-        model_noise = np.concatenate(sim_noise)
-        kl = marginal_kl(real, model_noise)
-        floor = kl_sampling_floor(real, model_noise)
-        st = structured_kl(real_f, [sp.fixed_in_clean for sp in specs], sim_frames)
+            del sims, nf
+        kl = kl_counts(n_counts, m_counts)
+        floor = kl_floor(n_counts + m_counts, real.size, m_size)
+        st = st_acc.result()
         out = {"kl": kl, "nll": nll_per_dim(self.g.held, specs, model), "kl_floor": floor,
                "kl_excess": max(kl - floor, 0.0), "kl_structured": st["kl"], "structured": st["families"],
-               "real_noise": real, "model_noise": model_noise[: real.size * 2]}
+               "real_noise": _thin(real), "model_noise": _thin(np.concatenate(plot_noise), 2 * PLOT_VALUES)}
         for name in diagnostics:
             vals = [s[name] for s in sim_stats]
             if self.held_stats.get(name) is None or any(v is None for v in vals):
@@ -262,7 +320,7 @@ class Loop:
         model = start if start is not None else base
         res = GroupResult(self.iso, base, model)
         tag = 0
-        discs, sims = self.evaluate(model, tag)
+        discs, _ = self.evaluate(model, tag)
         res.base_disc = discs
         excluded: set[str] = set()  # unexplained for good
         rejected: set[str] = set()  # effect did not help; retried once the model changes
@@ -305,7 +363,7 @@ class Loop:
                                         "reason": "needs a dark sequence to fit"})
                 continue
             cand = fit_effect(effect, chosen.name, self.g.fit_data, model, ctx)
-            new_discs, new_sims = self.evaluate(cand, tag)
+            new_discs, _ = self.evaluate(cand, tag)
             after = next((d for d in new_discs if d.name == chosen.name), None)
             held_after = self.heldout(cand, tag, (chosen.name,))
             hb = held_before.get(chosen.name)
@@ -333,7 +391,7 @@ class Loop:
                 (effect, held_before["real_noise"], held_before["model_noise"], held_after["model_noise"]))
             res.iterations.append(rec)
             if accepted:
-                model, discs, sims = cand, new_discs, new_sims
+                model, discs = cand, new_discs
                 held_before = self.heldout(model, tag, tuple(self.applicable))
                 rejected.clear()
             else:
@@ -353,7 +411,6 @@ class Loop:
         final_sig = {d.name: d for d in discs if d.significant}
         last = {u["diagnostic"]: u for u in res.unexplained}  # latest reason per diagnostic
         res.unexplained = [dict(u, discrepancy=final_sig[name].z) for name, u in last.items() if name in final_sig]
-        res.plots["final_sims"] = sims
         res.not_applicable = {k: self.not_applicable[k] for k in dg.DIAGNOSTICS if k in self.not_applicable}
         return res
 

@@ -59,15 +59,11 @@ def _linear_b0(x, y):
 def emva1288_numbers(seqs: list[Sequence]) -> dict | None:
     """EMVA 1288 numbers of a capture set: for a CFA sensor computed on each 2x2-site plane
     (EMVA 1288 evaluates each colour channel on its own) and averaged, with the per-plane
-    values under ``"planes"``; for a monochrome sensor on the whole image."""
+    values under ``"planes"``; for a monochrome sensor on the whole image. Whole frames, from
+    the sequences' streamed statistics (:class:`simcam.calibration.capture.FrameSummary`)."""
     if not seqs or seqs[0].cfa is None:
         return emva1288_mono(seqs)
-    import dataclasses
-
-    per = []
-    for dy, dx in PLANE_OFFSETS:
-        sub = [dataclasses.replace(s, frames=s.frames[:, dy::2, dx::2]) for s in seqs]
-        per.append(emva1288_mono(sub))
+    per = [emva1288_mono(seqs, site=k) for k in range(4)]
     if any(p is None for p in per):
         return None
     out = {}
@@ -78,7 +74,7 @@ def emva1288_numbers(seqs: list[Sequence]) -> dict | None:
     return out
 
 
-def emva1288_mono(seqs: list[Sequence]) -> dict | None:
+def emva1288_mono(seqs: list[Sequence], site: int = 4) -> dict | None:
     """EMVA 1288 K, sigma_d, DSNU1288 and PRNU1288 of one channel (reference-implementation procedure).
 
     Temporal points: every dark/flat sequence with exactly 2 frames; each flat
@@ -102,10 +98,8 @@ def emva1288_mono(seqs: list[Sequence]) -> dict | None:
     t_flats = [s for s in flats if s.n == 2] or flats
 
     def stats(s):
-        fr = s.frames[:2].astype(np.float64)
-        mu = float(fr.mean())
-        d = fr[0] - fr[1]
-        return mu, float(np.mean((d - d.mean()) ** 2) / 2)
+        st = s.stats()
+        return float(st.pair_mean[site]), float(st.pair_var[site])
 
     dark_t = {}
     for s in t_darks:
@@ -155,23 +149,18 @@ def emva1288_mono(seqs: list[Sequence]) -> dict | None:
     s_darks = [s for s in darks if s.n > 2]
     s_flats = [s for s in flats if s.n > 2 and s.saturated_fraction() <= 0.01]
     if s_darks:
-        sd = max(s_darks, key=lambda s: s.n)
-        avg_d, s2_d = _spatial(sd.frames)
+        sd = max(s_darks, key=lambda s: s.n).stats()
+        s2_d = _spatial(sd, site)
         if s2_d >= 0:
             out["dsnu_e"] = float(np.sqrt(s2_d) / K)
         if s_flats:
-            sf = max(s_flats, key=lambda s: (s.n, float(s.frames.mean())))
-            avg_f, s2_f = _spatial(sf.frames)
+            sf = max(s_flats, key=lambda s: (s.n, float(s.stats().avg_mean[4]))).stats()
+            s2_f = _spatial(sf, site)
             if s2_f - s2_d >= 0:
-                out["prnu_percent"] = float(np.sqrt(s2_f - s2_d) * 100 / (avg_f.mean() - avg_d.mean()))
+                out["prnu_percent"] = float(np.sqrt(s2_f - s2_d) * 100 / (sf.avg_mean[site] - sd.avg_mean[site]))
     return out
 
 
-def _spatial(frames: np.ndarray) -> tuple[np.ndarray, float]:
-    """(average image, spatial variance corrected for the temporal variance / L)."""
-    f = frames.astype(np.float64)
-    L = f.shape[0]
-    avg = f.mean(0)
-    s2_meas = float(np.var(avg, ddof=1))
-    stack = float(np.mean(np.var(f, axis=0, ddof=1)))
-    return avg, s2_meas - stack / L
+def _spatial(st, site: int) -> float:
+    """Spatial variance of the L-frame average image corrected for the temporal variance / L."""
+    return float(st.avg_var[site] - st.temporal_var[site] / st.n)

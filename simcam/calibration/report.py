@@ -64,13 +64,20 @@ def _plane_ptc(r: GroupResult) -> dict | None:
     return plane_ptc(darks, flats, r.base.full_scale_dn)
 
 
-def build_report(results: list[GroupResult], capture, cfg: LoopConfig, emva: dict[int, dict | None]) -> dict:
-    """The report.json document (see the README for the schema)."""
+def build_report(results: list[GroupResult], capture, cfg: LoopConfig, emva: dict[int, dict | None],
+                 dark: dict[int, dict] | None = None, emva1288_r4: dict[int, dict] | None = None) -> dict:
+    """The report.json document (see docs/loop.md for the schema).
+
+    ``dark``: dark current per ISO (:func:`simcam.calibration.dark_current.dark_current`);
+    ``emva1288_r4``: EMVA 1288 Release 4.0 results per ISO, written under each ISO's ``"emva1288"``
+    key as given (the full R4.0 evaluation is computed outside the loop).
+    """
     isos = []
     for r in results:
         isos.append({
             "iso": int(r.iso),
             "iso_label": iso_label(r.iso),
+            "analysed": r.plots["group"].region,
             "iterations": [{k: v for k, v in it.items()} for it in r.iterations],
             "effects": list(r.model.effects),
             "unexplained": [{"diagnostic": u["diagnostic"], "discrepancy": u["discrepancy"], "reason": u["reason"]}
@@ -90,6 +97,8 @@ def build_report(results: list[GroupResult], capture, cfg: LoopConfig, emva: dic
                         "structured_final": r.heldout_final["structured"],
                         "nll_base": r.heldout_base["nll"], "nll_final": r.heldout_final["nll"]},
             "emva": emva.get(r.iso),
+            "dark_current": (dark or {}).get(r.iso),
+            "emva1288": (emva1288_r4 or {}).get(r.iso),
             "notes": r.notes,
         })
     top_emva = None
@@ -105,7 +114,7 @@ def build_report(results: list[GroupResult], capture, cfg: LoopConfig, emva: dic
         "settings": {"replicates": cfg.replicates, "heldout_replicates": cfg.heldout_replicates,
                      "alpha": cfg.alpha, "correction": "Holm step-down over the applicable diagnostics",
                      "test": "two-sided Student t (R-1 dof) on the standardised discrepancy",
-                     "max_size": cfg.max_size, "seed": cfg.seed, "max_iterations": cfg.max_iterations,
+                     "max_size": cfg.max_size, "max_pixels": cfg.max_pixels, "tile": cfg.tile, "seed": cfg.seed, "max_iterations": cfg.max_iterations,
                      "simulator": "simcam.noise composite (the profile.yaml entry), Composite.sample_frames"},
         "kl_binning": KL_BINNING,
         "structured_kl": STRUCTURED_KL,
@@ -135,6 +144,7 @@ def loop_model_dict(results: list[GroupResult], capture, camera_id: str | None =
         isos.append({
             "iso": int(r.iso),
             "iso_label": iso_label(r.iso),
+            "analysed": r.plots["group"].region,
             "model": {"type": "poisson_gaussian", "beta1": float(m.K / fs), "beta2": float(m.read_dn ** 2 / fs ** 2)},
             "K_dn_per_e": float(m.K), "read_dn": float(m.read_dn),
             "black_level": [float(x) for x in np.asarray(m.black_dn).ravel()],
@@ -436,6 +446,7 @@ def run_and_write(capture_dir: str | Path, out_dir: str | Path, *, start_profile
     from ..errors import DatasetError
     from .capture import read_capture_set
     from .loop import run_loop
+    from .dark_current import dark_current
     from .photon_transfer import emva1288_numbers
 
     cfg = cfg or LoopConfig()
@@ -447,10 +458,15 @@ def run_and_write(capture_dir: str | Path, out_dir: str | Path, *, start_profile
     if start_profile and Path(start_profile).resolve() == (out_dir / "profile.yaml").resolve():
         raise DatasetError(f"--start-profile {start_profile}: would be overwritten by the output profile; "
                            "expected a file outside OUT_DIR")
-    capture = read_capture_set(capture_dir)
+    capture = read_capture_set(capture_dir, region=cfg.region(), progress=cfg.progress)
     results = run_loop(capture, cfg, starts)
     emva = {iso: emva1288_numbers(capture.group(iso)) for iso in capture.isos()}
-    doc = build_report(results, capture, cfg, emva)
+    dark = {}
+    for r in results:
+        e = emva.get(r.iso) or {}
+        K = e.get("K_dn_per_e") or (r.base.K if r.base.K > 0 else None)
+        dark[r.iso] = dark_current([s for s in capture.group(r.iso) if s.kind == "dark"], K)
+    doc = build_report(results, capture, cfg, emva, dark)
     out_dir.mkdir(parents=True, exist_ok=True)
     from .profile import noise_profile
 

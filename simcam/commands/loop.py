@@ -15,7 +15,8 @@ def loop(
     seed: int = typer.Option(0, "--seed", help="Seed of the parametric bootstrap."),
     replicates: int = typer.Option(16, "--replicates", help="Bootstrap replicates per diagnostic evaluation (>= 4)."),
     alpha: float = typer.Option(0.01, "--alpha", help="Family-wise significance level (Holm)."),
-    max_size: int = typer.Option(128, "--max-size", help="Centre crop (pixels per side) the loop works on."),
+    max_size: Optional[int] = typer.Option(None, "--max-size", help="Analyse a centre crop of this many pixels per side instead of the whole frame."),
+    max_pixels: int = typer.Option(512 * 512, "--max-pixels", help="Pixels per frame the residual battery and bootstrap analyse: the whole frame up to this, else tiles spread over the frame."),
 ) -> None:
     """Fit a noise model to measured frames, find and attribute its residuals, refit, report before/after."""
     from ..calibration.loop import LoopConfig
@@ -26,9 +27,11 @@ def loop(
         raise DatasetError(f"--replicates {replicates}: expected >= 4")
     if not 0 < alpha < 1:
         raise DatasetError(f"--alpha {alpha}: expected a level in (0, 1)")
-    if max_size < 16:
+    if max_size is not None and max_size < 16:
         raise DatasetError(f"--max-size {max_size}: expected >= 16 pixels")
-    cfg = LoopConfig(replicates=replicates, alpha=alpha, seed=seed, max_size=max_size)
+    if max_pixels < 64 * 64:
+        raise DatasetError(f"--max-pixels {max_pixels}: expected >= 4096 pixels")
+    cfg = LoopConfig(replicates=replicates, alpha=alpha, seed=seed, max_size=max_size, max_pixels=max_pixels)
     doc = run_and_write(capture_dir, out, start_profile=start_profile, cfg=cfg)
     for g in doc["isos"]:
         un = ", ".join(u["diagnostic"] for u in g["unexplained"]) or "none"

@@ -27,17 +27,17 @@ def emva():
     return emva1288_numbers(read_emva1288(desc).sequences), ref
 
 
-def test_emva_gain_and_dark_noise_within_3_percent(emva):
+def test_emva_gain_and_dark_noise_within_1_percent(emva):
     got, ref = emva
     assert ref["K_dn_per_e"] == pytest.approx(0.2801, abs=1e-4)  # the file read is the one the issue quotes
     for key in ("K_dn_per_e", "sigma_dark_e"):
-        assert got[key] == pytest.approx(ref[key], rel=0.03), key
+        assert got[key] == pytest.approx(ref[key], rel=0.01), key
 
 
 def test_emva_dsnu_prnu(emva):
     got, ref = emva
     for key in ("dsnu_e", "prnu_percent"):
-        assert got[key] == pytest.approx(ref[key], rel=0.03), key
+        assert got[key] == pytest.approx(ref[key], rel=0.01), key
 
 
 @pytest.mark.slow

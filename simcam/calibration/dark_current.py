@@ -1,0 +1,76 @@
+"""Dark current from dark sequences at several exposure times (one ISO), whole frames.
+
+The mean dark signal grows with the exposure time t as ``mu_dark(t) = mu_dark(0) + K mu_I t`` and the
+dark temporal variance as ``sigma_dark^2(t) = sigma_dark^2(0) + K^2 mu_I t`` (dark electrons are
+Poisson): EMVA Standard 1288 Release 4.0, the dark-current evaluation from the dark signal and the
+dark variance against exposure time. Both slopes are least-squares lines over the exposure times
+of the dark sequences' whole-frame statistics (:class:`simcam.calibration.capture.FrameSummary`),
+so ``mu_I`` (e-/s) comes twice: from the mean (needs a stable black level) and from the variance
+(needs no black level). Its non-uniformity is the spatial standard deviation of the per-pixel
+slope between the shortest and the longest exposure's temporal-mean images, corrected for their
+temporal noise (variance of the difference of two L-frame means: ``s2_1 / L_1 + s2_2 / L_2``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .capture import Sequence
+
+
+def dark_current(darks: list[Sequence], K: float | None) -> dict:
+    """Dark current of one ISO's dark sequences.
+
+    Parameters
+    ----------
+    darks : dark sequences (their exposure times and whole-frame statistics are used).
+    K : system gain in DN/e- (None or 0 when not measured: results stay in DN/s).
+
+    Returns
+    -------
+    dict
+        ``{"applicable": False, "reason": ...}`` when fewer than two exposure times are given;
+        else the exposure times (s), the mean dark signal (DN) and temporal variance (DN^2) at each,
+        the slopes ``dn_per_s`` and ``dn2_per_s``, ``e_per_s_from_mean`` and ``e_per_s_from_variance``
+        (None without K) and the non-uniformity ``nonuniformity_dn_per_s`` / ``nonuniformity_e_per_s``.
+    """
+    with_t = [s for s in darks if s.exposure_s is not None]
+    times = sorted({float(s.exposure_s) for s in with_t})
+    if len(times) < 2:
+        why = ("no dark sequence" if not darks else "dark exposure times not given" if not with_t
+               else f"darks at a single exposure time ({times[0]:.4g} s)")
+        return {"applicable": False, "reason": f"needs darks at >= 2 exposure times: {why}"}
+    mean, var, nframes = [], [], []
+    for t in times:
+        st = [s.stats() for s in with_t if float(s.exposure_s) == t]
+        w = np.array([x.n for x in st], dtype=np.float64)
+        mean.append(float(np.average([x.avg_mean[4] for x in st], weights=w)))
+        var.append(float(np.average([x.temporal_var[4] for x in st], weights=w)))
+        nframes.append(int(w.sum()))
+    t = np.asarray(times)
+    slope_m, icpt_m = np.polyfit(t, mean, 1)
+    slope_v, icpt_v = np.polyfit(t, var, 1)
+    good_k = K is not None and np.isfinite(K) and K > 0
+    out = {"applicable": True, "exposure_s": times, "frames": nframes, "mean_dn": mean, "temporal_var_dn2": var,
+           "dn_per_s": float(slope_m), "dn2_per_s": float(slope_v), "dark_dn_at_0s": float(icpt_m),
+           "dark_var_dn2_at_0s": float(icpt_v),
+           "e_per_s_from_mean": float(slope_m / K) if good_k else None,
+           "e_per_s_from_variance": float(slope_v / K ** 2) if good_k else None,
+           "nonuniformity_dn_per_s": None, "nonuniformity_e_per_s": None, "nonuniformity_reason": None}
+    first = max((s for s in with_t if float(s.exposure_s) == times[0]), key=lambda s: s.n).stats()
+    last = max((s for s in with_t if float(s.exposure_s) == times[-1]), key=lambda s: s.n).stats()
+    if first.mean_map is None or last.mean_map is None:
+        out["nonuniformity_reason"] = "temporal-mean images of the darks not kept"
+        return out
+    diff = last.mean_map.astype(np.float64) - first.mean_map.astype(np.float64)
+    noise = float(last.temporal_var[4] / last.n + first.temporal_var[4] / first.n)
+    s2 = float(np.var(diff, ddof=1)) - noise
+    dt = times[-1] - times[0]
+    if s2 <= 0:
+        out["nonuniformity_dn_per_s"] = 0.0
+        out["nonuniformity_reason"] = "below the temporal noise of the two mean images (set to 0)"
+    else:
+        out["nonuniformity_dn_per_s"] = float(np.sqrt(s2) / dt)
+    if good_k:
+        out["nonuniformity_e_per_s"] = out["nonuniformity_dn_per_s"] / K
+    return out
