@@ -343,6 +343,78 @@ def _fmt(v):
     return html.escape(str(v))
 
 
+#: unit and display scale of each effect parameter (the loop's own parameterisation, DN / relative)
+PARAM_UNITS = {"sigma_dn": ("DN", 1.0), "amplitude_dn": ("DN", 1.0), "offset_dn": ("DN", 1.0), "step_dn": ("DN", 1.0),
+               "period_px": ("px", 1.0), "sigma": ("%", 100.0), "fraction": ("%", 100.0), "c": ("% at white", 100.0),
+               "a": ("", 1.0), "lam": ("", 1.0), "gains": ("×", 1.0), "log_mean": ("ln DN", 1.0),
+               "log_sigma": ("ln DN", 1.0), "axis": ("", None)}
+
+
+def _num(v: float, digits: int = 3) -> str:
+    """``digits`` significant digits, no exponent between 1e-3 and 1e5."""
+    if v is None:
+        return "–"
+    v = float(v)
+    if v == 0 or 1e-3 <= abs(v) < 1e5:
+        return f"{v:.{digits}g}"
+    return f"{v:.{digits - 1}e}"
+
+
+def format_parameters(params: dict) -> str:
+    """Effect parameters with their units, e.g. ``sigma_dn = 2.66 DN``."""
+    out = []
+    for k, v in params.items():
+        unit, scale = PARAM_UNITS.get(k, ("", 1.0))
+        if scale is None or isinstance(v, str):
+            out.append(f"{k} = {v}")
+        elif isinstance(v, (list, tuple)):
+            out.append(f"{k} = [{', '.join(_num(x * scale) for x in v)}] {unit}".rstrip())
+        else:
+            out.append(f"{k} = {_num(v * scale)} {unit}".rstrip())
+    return "; ".join(out)
+
+
+def _model_table(g: dict) -> str:
+    """Base and final model: gain, read noise (DN and e-), black and white levels, with units."""
+    rows = ["<h3>Model</h3><table><tr><th></th><th>K (DN/e⁻)</th><th>read noise (DN)</th><th>read noise (e⁻)</th>"
+            "<th>black (DN)</th><th>white (DN)</th><th>effects</th></tr>"]
+    for name in ("base_model", "model"):
+        m = g[name]
+        K = m["K_dn_per_e"]
+        read_e = m["read_dn"] / K if K else None
+        black = np.asarray(m["black_dn"], dtype=np.float64)
+        eff = "; ".join(f"<b>{html.escape(k)}</b>: {html.escape(format_parameters(v))}" for k, v in m["effects"].items())
+        rows.append(f"<tr><td class=l>{'base fit' if name == 'base_model' else 'final'}</td>"
+                    f"<td>{_num(K, 4) if K else '– (no signal)'}</td><td>{_num(m['read_dn'], 4)}</td><td>{_num(read_e, 4)}</td>"
+                    f"<td>{_num(float(black.mean()), 5)}</td><td>{_num(m['white_dn'], 5)}</td>"
+                    f"<td class=l>{eff or 'none'}</td></tr>")
+    rows.append("</table>")
+    return "".join(rows)
+
+
+def _dark_table(dc: dict | None) -> str:
+    if not dc:
+        return ""
+    if not dc.get("applicable"):
+        return f"<h3>Dark current</h3><p>Not applicable: {html.escape(dc['reason'])}.</p>"
+    rows = ["<h3>Dark current (whole frames)</h3><table><tr><th>exposure (s)</th><th>frames</th>"
+            "<th>dark mean (DN)</th><th>dark temporal variance (DN²)</th></tr>"]
+    for t, n, m, v in zip(dc["exposure_s"], dc["frames"], dc["mean_dn"], dc["temporal_var_dn2"]):
+        rows.append(f"<tr><td>{_num(t, 4)}</td><td>{n}</td><td>{_num(m, 5)}</td><td>{_num(v, 4)}</td></tr>")
+    rows.append("</table><p>")
+    rows.append(f"Slopes: {_num(dc['dn_per_s'])} DN/s (mean), {_num(dc['dn2_per_s'])} DN²/s (variance). ")
+    if dc["e_per_s_from_mean"] is not None:
+        rows.append(f"Dark current {_num(dc['e_per_s_from_mean'])} e⁻/s from the mean, "
+                    f"{_num(dc['e_per_s_from_variance'])} e⁻/s from the variance. ")
+    if dc["nonuniformity_dn_per_s"] is not None:
+        nu_e = dc["nonuniformity_e_per_s"]
+        rows.append(f"Non-uniformity {_num(dc['nonuniformity_dn_per_s'])} DN/s"
+                    + (f" ({_num(nu_e)} e⁻/s)" if nu_e is not None else "")
+                    + (f", {html.escape(dc['nonuniformity_reason'])}" if dc.get("nonuniformity_reason") else "") + ".")
+    rows.append("</p>")
+    return "".join(rows)
+
+
 def _drop(before, after) -> str:
     if not before or before <= 0 or after is None:
         return ""
@@ -371,7 +443,7 @@ def _family_table(h: dict) -> str:
 def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
     parts = ["<!doctype html><html><head><meta charset='utf-8'><title>simcam loop report</title>",
              "<style>body{font-family:sans-serif;margin:2em;max-width:1200px} table{border-collapse:collapse;"
-             "font-size:13px} td,th{border:1px solid #bbb;padding:3px 6px;text-align:right} th{background:#eee}"
+             "font-size:13px;display:block;overflow-x:auto;max-width:100%} td,th{border:1px solid #bbb;padding:3px 6px;text-align:right} th{background:#eee}"
              " td.l{text-align:left} .sig{background:#fdd}</style></head><body>",
              f"<h1>simcam loop report</h1><p>Capture set <code>{html.escape(doc['capture_set'])}</code> "
              f"({doc['layout']}). Significance: {doc['settings']['correction']} at alpha = {doc['settings']['alpha']}"
@@ -393,6 +465,13 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
                      f"marginal KL {_fmt(g['heldout']['kl_structured_base'])} → {_fmt(g['heldout']['kl_structured_final'])}"
                      f"{_drop(g['heldout']['kl_structured_base'], g['heldout']['kl_structured_final'])}; "
                      f"NLL/dim {_fmt(g['heldout']['nll_base'])} → {_fmt(g['heldout']['nll_final'])} nats.</p>")
+        a = g.get("analysed")
+        if a:
+            parts.append(f"<p>Pixels analysed by the residual battery and the bootstrap: {a['pixels_analysed']:,} of "
+                         f"{a['frame'][0]} × {a['frame'][1]} ({100 * a['fraction']:.3g} %), {html.escape(a['layout'])}. "
+                         "EMVA 1288 numbers and the dark current use every pixel of every frame.</p>")
+        parts.append(_model_table(g))
+        parts.append(_dark_table(g.get("dark_current")))
         parts.append(_family_table(g["heldout"]))
         for note in g["notes"]:
             parts.append(f"<p><i>{html.escape(note)}</i></p>")
@@ -411,7 +490,7 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
                          f"<td>{_fmt(h['kl_structured_before'])}</td><td>{_fmt(h['kl_structured_after'])}</td>"
                          f"<td>{_fmt(h['nll_before'])}</td>"
                          f"<td>{_fmt(h['nll_after'])}</td><td>{'yes' if it['accepted'] else 'no'}</td>"
-                         f"<td class=l>{html.escape(json.dumps(it['parameters']))}</td></tr>")
+                         f"<td class=l>{html.escape(format_parameters(it['parameters']))}</td></tr>")
         parts.append("</table>")
         if g["unexplained"]:
             parts.append("<h3>Unexplained</h3><ul>" + "".join(
@@ -435,7 +514,8 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
                   "maps": "Temporal-mean maps", "hists": "Residual histograms before / after each added effect"}
         for key, title in titles.items():
             if key in figs.get(iso, {}):
-                parts.append(f"<h3>{title}</h3><img alt='{title}' src='data:image/png;base64,{figs[iso][key]}'>")
+                parts.append(f"<h3>{title}</h3><img alt='{title}' style='max-width:100%;height:auto' "
+                             f"src='data:image/png;base64,{figs[iso][key]}'>")
     parts.append("</body></html>")
     Path(path).write_text("\n".join(parts))
 
