@@ -130,3 +130,45 @@ def test_emva_descriptor_layouts(tmp_path, version, bits, fmt, seed):
     names = {d["name"] for d in g["diagnostics_base"]} | {x["diagnostic"] for x in g["not_applicable"]}
     assert names == set(dg.DIAGNOSTICS)
     assert json.loads((tmp_path / "out" / "report.json").read_text())["layout"] == "emva1288"
+
+
+def test_8bit_cmos_full_size_subcode_dark_noise():
+    """The issue's 8-bit CMOS geometry: 2048 x 512, K = 0.02 DN/e-, dark noise 0.5 DN (below one code);
+    analysed as a tile mosaic spanning the frame."""
+    cam = Camera(bit_depth=8, width=2048, height=512, K=0.02, dark_signal_0=10.0, sigma2_dark_0=625.0, seed=3)
+    white = float(cam.img_max)
+    seqs = [Sequence("dark", "dark", np.stack([cam.grab(0.0) for _ in range(4)]).astype(np.float32), 0, 0.01,
+                     None, None, white)]
+    for k, m in enumerate((0.3, 0.6)):
+        rad = cam.get_radiance_for(mean=m * white)
+        seqs.append(Sequence(f"flat_{k}", "flat", np.stack([cam.grab(rad) for _ in range(4)]).astype(np.float32),
+                             0, 0.01, None, None, white))
+    cfg = LoopConfig(replicates=8, heldout_replicates=4)
+    r = _check(run_loop(CaptureSet("memory", "directory", seqs), cfg))[0]
+    assert r.plots["group"].region["pixels_analysed"] <= cfg.max_pixels
+    assert "tiles" in r.plots["group"].region["layout"]
+
+
+@pytest.mark.slow
+def test_twelve_megapixel_set(tmp_path):
+    """A 4000 x 3000 Bayer set read from disk (darks at two exposure times, two flats), whole frames:
+    EMVA numbers from every pixel, the loop on its tile mosaic."""
+    from simcam.calibration.report import run_and_write
+    import yaml
+
+    rng = np.random.default_rng(5)
+    h, w, K = 3000, 4000, 2.0
+    for name, t, level, n in (("dark_a", 0.01, 0.0, 4), ("dark_b", 0.1, 0.0, 4), ("flat_0", 0.01, 300.0, 4),
+                              ("flat_1", 0.01, 900.0, 4)):
+        d = tmp_path / "set" / name
+        d.mkdir(parents=True)
+        for i in range(n):
+            e = rng.poisson(level + 50.0 * t, (h, w)) + rng.normal(0, 2.0, (h, w))
+            np.save(d / f"f{i}.npy", np.clip(np.round(64 + K * e), 0, 4095).astype(np.uint16))
+        (d / "sequence.yaml").write_text(yaml.safe_dump({"iso": 400, "exposure_s": t, "cfa": "RGGB",
+                                                          "black_level": 64, "white_level": 4095}))
+    doc = run_and_write(tmp_path / "set", tmp_path / "out", cfg=LoopConfig(replicates=8, heldout_replicates=4))
+    g = doc["isos"][0]
+    assert g["analysed"]["frame"] == [4000, 3000]
+    assert doc["emva"]["K_dn_per_e"] == pytest.approx(K, rel=0.02)
+    assert g["dark_current"]["applicable"]
