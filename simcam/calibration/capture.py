@@ -204,7 +204,7 @@ class _SequenceBuilder:
 def _progress(total: int, desc: str, enabled: bool | None):
     from tqdm.auto import tqdm
 
-    return tqdm(total=total, desc=desc, unit="frame", disable=enabled is False, leave=False)
+    return tqdm(total=total, desc=desc, unit="frame", disable=None if enabled is None else not enabled, leave=False)
 
 
 def sequence_kind(name: str) -> str:

@@ -254,7 +254,7 @@ class Loop:
 
         label = f"ISO {self.iso}" if self.iso > 0 else "ISO not given"
         return tqdm(range(n), desc=f"{label}: {what}", unit="capture", leave=False,
-                    disable=self.cfg.progress is False)
+                    disable=None if self.cfg.progress is None else not self.cfg.progress)
 
     def _rng(self, *tag):
         return np.random.default_rng([self.cfg.seed, self.iso, *tag])
@@ -332,12 +332,15 @@ class Loop:
             sig = [d for d in discs if d.significant and d.name not in excluded | rejected]
             if not sig:
                 break
-            chosen = max(sig, key=lambda d: (-np.log10(max(d.p, 1e-300)), abs(d.z)))
-            sig_names = {d.name for d in sig}
-            for pre in dg.PRECEDENCE.get(chosen.name, ()):
-                if pre in sig_names:
-                    chosen = next(d for d in sig if d.name == pre)
-                    break
+            def strength(d):
+                return (-np.log10(max(d.p, 1e-300)), abs(d.z))
+
+            chosen = max(sig, key=strength)
+            # a more specific symptom of an effect that also inflates the chosen one goes first; of several,
+            # the most significant (not the first listed)
+            pre = [d for d in sig if d.name in dg.PRECEDENCE.get(chosen.name, ())]
+            if pre:
+                chosen = max(pre, key=strength)
             effect = dg.DIAGNOSTIC_EFFECT[chosen.name]
             outside = [b for b in dg.NULL_NEEDS.get(chosen.name, ()) if b in unmodelled]
             if outside:

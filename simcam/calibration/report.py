@@ -64,6 +64,35 @@ def _plane_ptc(r: GroupResult) -> dict | None:
     return plane_ptc(darks, flats, r.base.full_scale_dn)
 
 
+#: diagnostics of the battery that probe each structured-KL family
+FAMILY_DIAGNOSTICS = {
+    "pixel": ("dsnu_excess", "hot_pixel_tail", "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "prnu_excess",
+              "ptc_curvature", "plane_gain_spread", "black_offset"),
+    "row": ("row_mean_excess", "row_spectrum_peak"),
+    "column": ("col_temporal_excess", "col_fpn_excess", "col_spectrum_peak"),
+    "temporal": ("dsnu_excess", "prnu_excess", "hot_pixel_tail", "col_fpn_excess"),
+    "block": ("lag1_corr", "lag2_corr", "dark_checker_jitter"),
+    "frame": ("frame_mean_jitter", "dark_checker_jitter"),
+}
+
+
+def remaining_families(r: GroupResult) -> list[dict]:
+    """Structured-KL families still significant under the final model, each with its reason: the
+    unexplained diagnostics that probe it (and why they are unexplained), or that none of the battery's
+    diagnostics is significant for it (a shape outside what the battery tests)."""
+    out = []
+    unexpl = {u["diagnostic"]: u["reason"] for u in r.unexplained}
+    for fam, f in (r.heldout_final.get("structured") or {}).items():
+        if not f["significant"]:
+            continue
+        hits = [f"{d} ({unexpl[d]})" for d in FAMILY_DIAGNOSTICS.get(fam, ()) if d in unexpl]
+        reason = ("unexplained: " + "; ".join(hits)) if hits else (
+            "no diagnostic of the battery probing this family is significant: the discrepancy has a shape "
+            "the battery does not test")
+        out.append({"family": fam, "excess": f["excess"], "z": f["z"], "reason": reason})
+    return out
+
+
 def build_report(results: list[GroupResult], capture, cfg: LoopConfig, emva: dict[int, dict | None],
                  dark: dict[int, dict] | None = None, emva1288_r4: dict[int, dict] | None = None) -> dict:
     """The report.json document (see docs/loop.md for the schema).
@@ -88,6 +117,7 @@ def build_report(results: list[GroupResult], capture, cfg: LoopConfig, emva: dic
             "diagnostics_base": [_disc_dict(d) for d in r.base_disc],
             "diagnostics_final": [_disc_dict(d) for d in r.final],
             "not_applicable": [{"diagnostic": k, "reason": v} for k, v in r.not_applicable.items()],
+            "remaining_families": remaining_families(r),
             "heldout": {"kl_base": r.heldout_base["kl"], "kl_final": r.heldout_final["kl"],
                         "kl_sampling_floor": r.heldout_final["kl_floor"],
                         "kl_excess_base": r.heldout_base["kl_excess"], "kl_excess_final": r.heldout_final["kl_excess"],
@@ -351,13 +381,10 @@ PARAM_UNITS = {"sigma_dn": ("DN", 1.0), "amplitude_dn": ("DN", 1.0), "offset_dn"
 
 
 def _num(v: float, digits: int = 3) -> str:
-    """``digits`` significant digits, no exponent between 1e-3 and 1e5."""
+    """``digits`` significant digits (``g`` format: an exponent only below 1e-4 or beyond the digits)."""
     if v is None:
         return "–"
-    v = float(v)
-    if v == 0 or 1e-3 <= abs(v) < 1e5:
-        return f"{v:.{digits}g}"
-    return f"{v:.{digits - 1}e}"
+    return f"{float(v):.{digits}g}"
 
 
 def format_parameters(params: dict) -> str:
@@ -473,6 +500,10 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
         parts.append(_model_table(g))
         parts.append(_dark_table(g.get("dark_current")))
         parts.append(_family_table(g["heldout"]))
+        if g.get("remaining_families"):
+            parts.append("<p>Families still significant under the final model:</p><ul>" + "".join(
+                f"<li>{f['family']} (excess {_num(f['excess'])}, z = {f['z']:.1f}): {html.escape(f['reason'])}</li>"
+                for f in g["remaining_families"]) + "</ul>")
         for note in g["notes"]:
             parts.append(f"<p><i>{html.escape(note)}</i></p>")
         parts.append("<h3>Iterations</h3><table><tr><th>#</th><th>effect</th><th>diagnostic</th><th>z before</th>"
