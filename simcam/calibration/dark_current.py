@@ -6,9 +6,11 @@ Poisson): EMVA Standard 1288 Release 4.0, the dark-current evaluation from the d
 dark variance against exposure time. Both slopes are least-squares lines over the exposure times
 of the dark sequences' whole-frame statistics (:class:`simcam.calibration.capture.FrameSummary`),
 so ``mu_I`` (e-/s) comes twice: from the mean (needs a stable black level) and from the variance
-(needs no black level). Its non-uniformity is the spatial standard deviation of the per-pixel
-slope between the shortest and the longest exposure's temporal-mean images, corrected for their
-temporal noise (variance of the difference of two L-frame means: ``s2_1 / L_1 + s2_2 / L_2``).
+(needs no black level; the temporal variance of each exposure is half the variance of its first
+frame pair's difference, as EMVA 1288 computes it). Its non-uniformity is the spatial standard
+deviation of the per-pixel least-squares slope of the temporal-mean images against exposure time,
+its variance corrected by the temporal noise the slope carries (``sum c_i^2 s2_i / L_i`` with
+``c_i`` the slope weights, ``s2_i`` the temporal variance and ``L_i`` the frames of exposure i).
 """
 
 from __future__ import annotations
@@ -35,6 +37,9 @@ def dark_current(darks: list[Sequence], K: float | None) -> dict:
         (None without K) and the non-uniformity ``nonuniformity_dn_per_s`` / ``nonuniformity_e_per_s``.
     """
     with_t = [s for s in darks if s.exposure_s is not None]
+    pairs = [s for s in with_t if s.n == 2]
+    if len({float(s.exposure_s) for s in pairs}) >= 2:  # EMVA 1288 temporal darks (frame pairs): those alone
+        with_t = pairs
     times = sorted({float(s.exposure_s) for s in with_t})
     if len(times) < 2:
         why = ("no dark sequence" if not darks else "dark exposure times not given" if not with_t
@@ -45,7 +50,7 @@ def dark_current(darks: list[Sequence], K: float | None) -> dict:
         st = [s.stats() for s in with_t if float(s.exposure_s) == t]
         w = np.array([x.n for x in st], dtype=np.float64)
         mean.append(float(np.average([x.avg_mean[4] for x in st], weights=w)))
-        var.append(float(np.average([x.temporal_var[4] for x in st], weights=w)))
+        var.append(float(np.average([x.pair_var[4] for x in st], weights=w)))
         nframes.append(int(w.sum()))
     t = np.asarray(times)
     slope_m, icpt_m = np.polyfit(t, mean, 1)
@@ -57,20 +62,23 @@ def dark_current(darks: list[Sequence], K: float | None) -> dict:
            "e_per_s_from_mean": float(slope_m / K) if good_k else None,
            "e_per_s_from_variance": float(slope_v / K ** 2) if good_k else None,
            "nonuniformity_dn_per_s": None, "nonuniformity_e_per_s": None, "nonuniformity_reason": None}
-    first = max((s for s in with_t if float(s.exposure_s) == times[0]), key=lambda s: s.n).stats()
-    last = max((s for s in with_t if float(s.exposure_s) == times[-1]), key=lambda s: s.n).stats()
-    if first.mean_map is None or last.mean_map is None:
-        out["nonuniformity_reason"] = "temporal-mean images of the darks not kept"
-        return out
-    diff = last.mean_map.astype(np.float64) - first.mean_map.astype(np.float64)
-    noise = float(last.temporal_var[4] / last.n + first.temporal_var[4] / first.n)
-    s2 = float(np.var(diff, ddof=1)) - noise
-    dt = times[-1] - times[0]
+    maps, noise = [], []  # per exposure time: frame-weighted temporal-mean image, its temporal noise variance
+    for t_ in times:
+        st = [x.stats() for x in with_t if float(x.exposure_s) == t_]
+        if any(x.mean_map is None for x in st):
+            out["nonuniformity_reason"] = "temporal-mean images of the darks not kept"
+            return out
+        w = np.array([x.n for x in st], dtype=np.float64)
+        maps.append(sum(wi * x.mean_map.astype(np.float64) for wi, x in zip(w, st)) / w.sum())
+        noise.append(float(np.average([x.temporal_var[4] for x in st], weights=w)) / w.sum())
+    c = (t - t.mean()) / np.sum((t - t.mean()) ** 2)  # per-pixel least-squares slope weights
+    slope = sum(ci * m for ci, m in zip(c, maps))
+    s2 = float(np.var(slope, ddof=1)) - float(np.sum(c ** 2 * np.asarray(noise)))
     if s2 <= 0:
         out["nonuniformity_dn_per_s"] = 0.0
-        out["nonuniformity_reason"] = "below the temporal noise of the two mean images (set to 0)"
+        out["nonuniformity_reason"] = "below the temporal noise of the mean images (set to 0)"
     else:
-        out["nonuniformity_dn_per_s"] = float(np.sqrt(s2) / dt)
+        out["nonuniformity_dn_per_s"] = float(np.sqrt(s2))
     if good_k:
         out["nonuniformity_e_per_s"] = out["nonuniformity_dn_per_s"] / K
     return out

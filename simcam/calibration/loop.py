@@ -117,8 +117,10 @@ class Group:
             other = sorted({_t(s) for s in darks} - {t_dark})
             if other:
                 self.seqs = [s for s in self.seqs if s.kind != "dark" or _t(s) == t_dark]
+                listed = ", ".join(_fmt_s(t) for t in other) if len(other) <= 4 else \
+                    f"{len(other)} other exposure times ({_fmt_s(other[0])} to {_fmt_s(other[-1])})"
                 notes.append(f"darks at {_fmt_s(t_dark)} used by the loop (the exposure time with the most dark "
-                             f"frames); darks at {', '.join(_fmt_s(t) for t in other)} only in the dark-current fit "
+                             f"frames); darks at {listed} only in the dark-current fit "
                              "(dark sequences of different exposure times are not pooled)")
         r0 = self.seqs[0]
         self.cfa, self.white = r0.cfa, r0.white_dn

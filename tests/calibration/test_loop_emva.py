@@ -72,3 +72,18 @@ def test_emva_numbers_on_generated_cfa_set_match_the_generator():
     assert e["sigma_dark_e"] == pytest.approx(1.5, rel=0.06)
     assert e["prnu_percent"] == pytest.approx(2.0, rel=0.15)
     assert len(e["planes"]) == 4 and np.isfinite(e["dsnu_e"] or 0.0)
+
+
+def test_emva_dark_current_matches_reference(emva):
+    """Dark current from the mean and from the variance of the CCD's temporal darks (50 exposure
+    times), against the reference implementation's results file."""
+    from simcam.calibration.dark_current import dark_current
+
+    got, _ = emva
+    txt = shared_path("emva1288_ccd/emva1288_v1.0.2_results.txt").read_text()
+    ref_mean = float(re.search(r"\$\\mu_\{I\.mean\}\$\s+(\S+)", txt).group(1))
+    ref_var = float(re.search(r"\$\\mu_\{I\.var\}\$\s+(\S+)", txt).group(1))
+    seqs = read_emva1288(shared_path("emva1288_ccd/EMVA1288_Data.txt"), progress=False).sequences
+    dc = dark_current([s for s in seqs if s.kind == "dark"], got["K_dn_per_e"])
+    assert dc["e_per_s_from_mean"] == pytest.approx(ref_mean, rel=0.01)
+    assert dc["e_per_s_from_variance"] == pytest.approx(ref_var, rel=0.01)
