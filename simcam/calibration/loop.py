@@ -102,11 +102,15 @@ class Group:
 
     def __init__(self, seqs: list[Sequence], cfg: LoopConfig, notes: list):
         self.seqs = []
+        saturated = []
         for s in seqs:
             if s.kind == "flat" and s.saturated_fraction() > 0.01:
-                notes.append(f"{s.name}: saturated flat ({100 * s.saturated_fraction():.0f}% at white) left out of the loop")
+                saturated.append(f"{s.name} ({100 * s.saturated_fraction():.0f}% at white)")
                 continue
             self.seqs.append(s)
+        if saturated:
+            notes.append(f"saturated flat{'s' if len(saturated) > 1 else ''} left out of the loop: "
+                         + ", ".join(saturated))
         if not self.seqs:
             raise DatasetError(f"ISO {seqs[0].iso}: no usable sequence left (all saturated)")
         self.dark_exposure_s = None

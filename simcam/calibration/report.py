@@ -426,7 +426,13 @@ def _dark_table(dc: dict | None) -> str:
         return f"<h3>Dark current</h3><p>Not applicable: {html.escape(dc['reason'])}.</p>"
     rows = ["<h3>Dark current (whole frames)</h3><table><tr><th>exposure (s)</th><th>frames</th>"
             "<th>dark mean (DN)</th><th>dark temporal variance (DN²)</th></tr>"]
-    for t, n, m, v in zip(dc["exposure_s"], dc["frames"], dc["mean_dn"], dc["temporal_var_dn2"]):
+    pts = list(zip(dc["exposure_s"], dc["frames"], dc["mean_dn"], dc["temporal_var_dn2"]))
+    shown = pts if len(pts) <= 8 else pts[:3] + [None] + pts[-3:]
+    for pt in shown:
+        if pt is None:
+            rows.append(f"<tr><td colspan=4 class=l>… {len(pts) - 6} more exposure times …</td></tr>")
+            continue
+        t, n, m, v = pt
         rows.append(f"<tr><td>{_num(t, 4)}</td><td>{n}</td><td>{_num(m, 5)}</td><td>{_num(v, 4)}</td></tr>")
     rows.append("</table><p>")
     rows.append(f"Slopes: {_num(dc['dn_per_s'])} DN/s (mean), {_num(dc['dn2_per_s'])} DN²/s (variance). ")
@@ -505,7 +511,8 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
                 f"<li>{f['family']} (excess {_num(f['excess'])}, z = {f['z']:.1f}): {html.escape(f['reason'])}</li>"
                 for f in g["remaining_families"]) + "</ul>")
         for note in g["notes"]:
-            parts.append(f"<p><i>{html.escape(note)}</i></p>")
+            if note not in doc["notes"]:
+                parts.append(f"<p><i>{html.escape(note)}</i></p>")
         parts.append("<h3>Iterations</h3><table><tr><th>#</th><th>effect</th><th>diagnostic</th><th>z before</th>"
                      "<th>z after</th><th>held-out z before</th><th>held-out z after</th><th>pixel KL before</th>"
                      "<th>pixel KL after</th><th>KL excess before</th><th>KL excess after</th>"
