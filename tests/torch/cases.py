@@ -10,7 +10,7 @@ MODEL_CASES = {
     "poisson_gaussian": PG4,
     "poisson_mixture": {"type": "poisson_mixture", "beta1": [2.0e-3, 3.0e-3, 2.5e-3, 4.0e-3], "beta2": 2.0e-5,
                         "z1": 0.5, "z2": 3.0, "p1": 0.3},
-    "clipped": {"type": "clipped", "base": PG4, "low": 0.0, "high": 0.6},
+    "clipped": {"type": "clipped", "base": PG4, "low": 0.0, "high": 0.5},  # exact in float32
     "composite": {"type": "composite", "base": NLF4, "effects": [{"type": "dsnu", "sigma": 0.004}], "sensor_seed": 5},
 }
 
