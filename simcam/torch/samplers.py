@@ -20,7 +20,7 @@ from __future__ import annotations
 import torch
 
 from ..errors import NoiseModelError
-from .context import Ctx
+from .context import Ctx, sites
 from .group import Group
 
 #: largest Poisson mean sampled (as the numpy ``poisson_gaussian``: integer counts exact in float32).
@@ -33,12 +33,44 @@ def gaussian(group: Group, clean: torch.Tensor, ctx: Ctx) -> torch.Tensor:
     return clean + sd * ctx.randn(clean.shape)
 
 
+def _nlf_host(group: Group, clean: torch.Tensor, ctx: Ctx):
+    """CPU float32 fast path for one NLF with site-independent betas: simcam's fused compiled NLF kernel
+    (one pass, no temporaries), seeded from ``ctx.generator``; None when it does not apply."""
+    if not (clean.device.type == "cpu" and clean.dtype == torch.float32 and not clean.requires_grad
+            and group.shared and clean.is_contiguous()):
+        return None
+    m = group.uniq[0]
+    b1, b2 = sites(m.beta1), sites(m.beta2)
+    if (b1 != b1[0]).any() or (b2 != b2[0]).any():
+        return None
+    try:  # the kernel module may move; the torch path below is the same law
+        from ..noise.nlf_kernel import nlf_noise
+    except ImportError:  # pragma: no cover
+        return None
+    import numpy as np
+
+    rng = np.random.default_rng(int(torch.randint(0, 2**62, (1,), generator=ctx.generator)))
+    out = torch.empty_like(clean)
+    nlf_noise(clean.numpy(), float(b1[0]), float(b2[0]), rng, clip=None, out=out.numpy())
+    return out
+
+
 def nlf(group: Group, clean: torch.Tensor, ctx: Ctx) -> torch.Tensor:
-    """``clean + sqrt(beta1 clean + beta2) * z``, z ~ N(0, 1) (reparameterised)."""
+    """``clean + sqrt(beta1 clean + beta2) * z``, z ~ N(0, 1) (reparameterised).
+
+    On the CPU (float32, no gradient, one model with site-independent betas) this runs simcam's fused
+    NLF kernel; elsewhere torch operations. Same law; the bytes differ.
+    """
+    fast = _nlf_host(group, clean, ctx)
+    if fast is not None:
+        return fast
     b1 = ctx.site(group, lambda m: m.beta1)
     b2 = ctx.site(group, lambda m: m.beta2)
-    var = clean * b1 + b2
-    return clean + torch.sqrt(var.clamp_min(0)) * ctx.randn(clean.shape)
+    z = ctx.randn(clean.shape)
+    if clean.requires_grad or b1.requires_grad:
+        return clean + torch.sqrt((clean * b1 + b2).clamp_min(0)) * z
+    sd = torch.addcmul(b2, clean, b1).clamp_min_(0).sqrt_()  # fewer passes and no temporaries
+    return z.mul_(sd).add_(clean)
 
 
 def poisson_scaled(clean: torch.Tensor, scale: torch.Tensor, beta2: torch.Tensor, ctx: Ctx, *, where: str) -> torch.Tensor:
@@ -54,8 +86,40 @@ def poisson_scaled(clean: torch.Tensor, scale: torch.Tensor, beta2: torch.Tensor
     return scale * k + torch.sqrt(beta2) * ctx.randn(clean.shape)
 
 
+def _pg_host(group: Group, clean: torch.Tensor, ctx: Ctx) -> torch.Tensor:
+    """CPU float32 fast path: simcam's own exact sampler (alias tables, compiled kernel) through the public
+    ``NoiseModel.sample_stack``, seeded from ``ctx.generator`` (so still deterministic given it)."""
+    import numpy as np
+
+    from ..noise import NoiseCondition
+    from .layout import PACKED, to_mosaic, to_packed
+
+    seed = int(torch.randint(0, 2**62, (1,), generator=ctx.generator))
+    rng = np.random.default_rng(seed)
+    mosaic = to_mosaic(clean) if ctx.layout == PACKED else clean
+    src = mosaic[:, 0].detach().contiguous().numpy()
+    out = np.empty_like(src)
+    cond = NoiseCondition(cfa="RGGB", source="clean")
+    for u, model in enumerate(group.uniq):
+        sel = slice(None) if group.shared else np.flatnonzero(group.inv == u)
+        out[sel] = model.sample_stack(src[sel], cond, rng)
+    t = torch.from_numpy(out)[:, None]
+    return to_packed(t) if ctx.layout == PACKED else t
+
+
+def _host_ok(clean: torch.Tensor, ctx: Ctx) -> bool:
+    h = clean.shape[-2] * (2 if ctx.layout == "packed" else 1)
+    return clean.device.type == "cpu" and clean.dtype == torch.float32 and h % 2 == 0 and not clean.requires_grad
+
+
 def poisson_gaussian(group: Group, clean: torch.Tensor, ctx: Ctx) -> torch.Tensor:
-    """``beta1 * Poisson(clean / beta1) + N(0, beta2)``."""
+    """``beta1 * Poisson(clean / beta1) + N(0, beta2)``.
+
+    On the CPU (float32) this calls simcam's exact alias-table sampler (several times faster than
+    ``torch.poisson`` there); elsewhere ``torch.poisson``. Both are exact; the bytes differ.
+    """
+    if _host_ok(clean, ctx):
+        return _pg_host(group, clean, ctx)
     b1 = ctx.site(group, lambda m: m.beta1)
     b2 = ctx.site(group, lambda m: m.beta2)
     return poisson_scaled(clean, b1, b2, ctx, where="poisson_gaussian")

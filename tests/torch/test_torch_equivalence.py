@@ -31,8 +31,8 @@ def _numpy_frames(model, clean, n=N, seed=1):
     return np.stack([model.sample(clean, COND, rng) for _ in range(n)]).astype(np.float64)
 
 
-def _torch_frames(model, clean, layout, n=N, seed=2, device="cpu"):
-    c = torch.as_tensor(clean, device=device)[None, None].expand(n, 1, H, W).contiguous()
+def _torch_frames(model, clean, layout, n=N, seed=2, device="cpu", dtype=torch.float32):
+    c = torch.as_tensor(clean, device=device, dtype=dtype)[None, None].expand(n, 1, H, W).contiguous()
     if layout == "packed":
         c = to_packed(c)
     g = torch.Generator(device=device).manual_seed(seed)
@@ -113,6 +113,17 @@ def test_effect_law(name, layout):
     model = model_from_entry(effect_entry(name))
     clean = _clean()
     assert_same_law(_numpy_frames(model, clean), _torch_frames(model, clean, layout))
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("entry", [{"type": "nlf", "beta1": 2e-3, "beta2": 1e-5}, MODEL_CASES["poisson_gaussian"]],
+                         ids=["nlf_scalar", "poisson_gaussian"])
+def test_both_cpu_paths(entry, dtype):
+    """float32 on the CPU takes simcam's compiled kernels (fused NLF, alias-table Poisson); float64 the torch
+    operations (``torch.randn`` / ``torch.poisson``, as on CUDA): both draw from the numpy model's law."""
+    model = model_from_entry(entry)
+    clean = _clean()
+    assert_same_law(_numpy_frames(model, clean), _torch_frames(model, clean, "packed", dtype=dtype))
 
 
 def test_the_check_detects_a_different_fixed_pattern():
