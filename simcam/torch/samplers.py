@@ -83,7 +83,10 @@ def poisson_scaled(clean: torch.Tensor, scale: torch.Tensor, beta2: torch.Tensor
                                   f"below {LAMBDA_MAX:.3g} (use the nlf model for such signals)")
     work = lam if lam.dtype in (torch.float32, torch.float64) else lam.float()
     k = torch.poisson(work, generator=ctx.generator).to(clean.dtype)
-    return scale * k + torch.sqrt(beta2) * ctx.randn(clean.shape)
+    z = ctx.randn(clean.shape)
+    if scale.requires_grad or beta2.requires_grad:
+        return scale * k + torch.sqrt(beta2) * z
+    return z.mul_(torch.sqrt(beta2)).addcmul_(scale, k)  # in place: no temporaries
 
 
 def _pg_host(group: Group, clean: torch.Tensor, ctx: Ctx) -> torch.Tensor:
