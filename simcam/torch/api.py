@@ -40,9 +40,30 @@ def _exposure(clean: torch.Tensor, exposure: Any) -> torch.Tensor:
     return clean * torch.as_tensor(vals, dtype=clean.dtype).to(clean.device).reshape(-1, 1, 1, 1)
 
 
+def _offsets(offsets: Any, frame_shape: Any, clean: torch.Tensor, layout: str):
+    if frame_shape is None and offsets is None:
+        return None
+    if frame_shape is None or offsets is None:
+        raise NoiseModelError("offsets: frame_shape and offsets go together (the full frame and each patch's place in it)")
+    fh, fw = (int(v) for v in frame_shape)
+    o = np.asarray(offsets, dtype=np.int64).reshape(-1, 2)
+    if o.shape[0] == 1:
+        o = np.repeat(o, clean.shape[0], axis=0)
+    if o.shape[0] != clean.shape[0]:
+        raise NoiseModelError(f"offsets: expected one (row, column) per sample ({clean.shape[0]}), got {o.shape[0]}")
+    h, w = clean.shape[-2:]
+    if layout == PACKED:
+        h, w = 2 * h, 2 * w
+    if (o % 2).any() or (o < 0).any() or (o[:, 0] + h > fh).any() or (o[:, 1] + w > fw).any():
+        raise NoiseModelError(f"offsets: expected even offsets with the {h}x{w} patch inside the {fh}x{fw} frame, "
+                              f"got {o.tolist()}")
+    return o
+
+
 def add_noise(clean: torch.Tensor, profile_or_model: Any, *, iso: Any = None, exposure: Any = None,
               camera: Any = None, generator: torch.Generator | None = None, extrapolate: bool = False,
-              validate: bool = True, temperature: float | None = None, _cache: dict | None = None) -> torch.Tensor:
+              validate: bool = True, temperature: float | None = None, frame_shape: Any = None,
+              offsets: Any = None, _cache: dict | None = None) -> torch.Tensor:
     """Noisy raw batch for a clean one, drawn on the batch's device.
 
     Parameters
@@ -74,6 +95,13 @@ def add_noise(clean: torch.Tensor, profile_or_model: Any, *, iso: Any = None, ex
         synchronisation per call); turn off in a tight training loop once the data is known good.
     temperature : float, optional
         Noise Flow latent temperature (default: the flow's own).
+    frame_shape : (int, int), optional
+        Mosaic (H, W) of the full sensor frame the patches were cropped from. With ``offsets``, the
+        composite's fixed patterns (DSNU, PRNU, column FPN, hot pixels) are drawn once for the full frame
+        and each sample gets its crop, and fixed-phase periodic patterns are evaluated at the sample's
+        place in the frame; without it a patch is a frame of its own size.
+    offsets : sequence of B (row, column), optional
+        Mosaic position of each patch's pixel (0, 0) in the full frame (even values: the CFA phase).
 
     Returns
     -------
@@ -97,7 +125,8 @@ def add_noise(clean: torch.Tensor, profile_or_model: Any, *, iso: Any = None, ex
     work = x if x.dtype in (torch.float32, torch.float64) else x.float()
     models = resolve_models(profile_or_model, b, iso=iso, camera=camera, extrapolate=extrapolate, cache=_cache)
     ctx = Ctx(device=clean.device, dtype=work.dtype, layout=layout, shape=tuple(work.shape[-2:]),
-              generator=generator, validate=validate)
+              generator=generator, validate=validate, frame_shape=None if frame_shape is None else tuple(frame_shape),
+              offsets=_offsets(offsets, frame_shape, clean, layout))
     groups = group_models(models)
     if len(groups) == 1:
         out = sample_group(groups[0], work, ctx)
@@ -147,7 +176,7 @@ class AddNoise(nn.Module):
         self._memo: dict = {}
 
     def forward(self, clean: torch.Tensor, *, iso: Any = None, exposure: Any = None,
-                generator: torch.Generator | None = None) -> torch.Tensor:
+                generator: torch.Generator | None = None, frame_shape: Any = None, offsets: Any = None) -> torch.Tensor:
         return add_noise(clean, self.source, iso=iso, exposure=exposure, camera=self.camera, generator=generator,
                          extrapolate=self.extrapolate, validate=self.validate, temperature=self.temperature,
-                         _cache=self._memo)
+                         frame_shape=frame_shape, offsets=offsets, _cache=self._memo)

@@ -43,9 +43,26 @@ def fixed_tensors(model, shape: tuple[int, int], device, dtype) -> list[dict[str
     return out
 
 
-def _stacked(group: Group, per_uniq: list[list[dict]], i: int):
+def crop(t: torch.Tensor, offsets: np.ndarray, shape: tuple[int, int], which=None) -> torch.Tensor:
+    """Per-sample crops ``[G, 1, h or 1, w or 1]`` of full-frame maps ``t`` ``[T, 1, FH or 1, FW or 1]``
+    at mosaic ``offsets`` ``[G, 2]`` (``which[g]``: the map of sample g, default 0)."""
+    dev = t.device
+    g = offsets.shape[0]
+    h = shape[0] if t.shape[-2] > 1 else 1
+    w = shape[1] if t.shape[-1] > 1 else 1
+    oy = torch.as_tensor(offsets[:, 0] if t.shape[-2] > 1 else np.zeros(g, np.int64), device=dev)
+    ox = torch.as_tensor(offsets[:, 1] if t.shape[-1] > 1 else np.zeros(g, np.int64), device=dev)
+    rows = oy[:, None, None] + torch.arange(h, device=dev)[None, :, None]
+    cols = ox[:, None, None] + torch.arange(w, device=dev)[None, None, :]
+    k = torch.zeros(g, dtype=torch.int64, device=dev) if which is None else torch.as_tensor(which, device=dev)
+    return t[k[:, None, None], 0, rows, cols][:, None]
+
+
+def _stacked(group: Group, per_uniq: list[list[dict]], i: int, offsets=None, shape=None):
     def get(name: str) -> torch.Tensor:
         ts = [u[i][name] for u in per_uniq]
+        if offsets is not None:
+            return crop(torch.cat(ts), offsets, shape, None if group.shared else group.inv)
         if group.shared:
             return ts[0]
         return torch.cat(ts)[torch.as_tensor(group.inv, device=ts[0].device)]
@@ -56,10 +73,12 @@ def composite(group: Group, clean: torch.Tensor, ctx: Ctx) -> torch.Tensor:
     from .dispatch import sample_group
 
     shape = tuple(clean.shape[-2:])
-    fixed = [fixed_tensors(m, shape, ctx.device, ctx.dtype) for m in group.uniq]
+    offsets = ctx.offsets_of(group)
+    fshape = shape if offsets is None else tuple(ctx.frame_shape)
+    fixed = [fixed_tensors(m, fshape, ctx.device, ctx.dtype) for m in group.uniq]
     effects = group.models[0].effects
     egroups = [group.sub(lambda m, i=i: m.effects[i]) for i in range(len(effects))]
-    states = [EffectState(_stacked(group, fixed, i)) for i in range(len(effects))]
+    states = [EffectState(_stacked(group, fixed, i, offsets, shape), offsets=offsets) for i in range(len(effects))]
     signal = clean
     for i, e in enumerate(effects):
         if e.stage == "signal":

@@ -26,6 +26,13 @@ class Ctx:
     shape: tuple[int, int]
     generator: torch.Generator | None
     validate: bool = True
+    #: full-frame (H, W) of the fixed patterns and each sample's (row, column) crop offset, or None
+    frame_shape: tuple[int, int] | None = None
+    offsets: np.ndarray | None = None  # [B, 2] int64, mosaic pixels, even
+
+    def offsets_of(self, group) -> np.ndarray | None:
+        """The crop offsets ``[G, 2]`` of a group's samples (None without ``frame_shape``)."""
+        return None if self.offsets is None else self.offsets[np.asarray(group.index)]
 
     def with_layout(self, layout: str, shape: tuple[int, int]) -> "Ctx":
         return replace(self, layout=layout, shape=shape)

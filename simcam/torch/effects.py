@@ -34,6 +34,7 @@ class EffectState:
 
     fixed: Any
     read: torch.Tensor | None = None
+    offsets: np.ndarray | None = None  # per-sample crop offsets [G, 2] in the full frame, or None
 
 
 # -- signal stage -------------------------------------------------------------
@@ -125,8 +126,11 @@ def periodic_pattern(group: Group, x, ctx: Ctx, st: EffectState):
         phase = ctx.rand((g, 1), dtype=torch.float64) * (2 * math.pi)
     else:
         phase = ctx.scalar(group, lambda e: e.phase, dtype=torch.float64).reshape(-1, 1)
-    n = x.shape[-2] if e0.axis == "rows" else x.shape[-1]
+    ax = 0 if e0.axis == "rows" else 1
+    n = x.shape[-2 + ax]
     i = torch.arange(n, device=x.device, dtype=torch.float64)[None, :]
+    if st.offsets is not None:  # position in the full frame
+        i = i + torch.as_tensor(st.offsets[:, ax], dtype=torch.float64, device=x.device)[:, None]
     wave = (amp * torch.sin(2 * math.pi * i / period + phase)).to(x.dtype)  # [G, n]
     return x + (wave[:, None, :, None] if e0.axis == "rows" else wave[:, None, None, :])
 

@@ -191,3 +191,36 @@ def test_cuda_generator_on_the_wrong_device_is_refused():
     with pytest.raises(NoiseModelError, match="generator"):
         add_noise(torch.full((1, 4, 4, 4), 0.1, device="cuda"), model_from_entry(NLF4),
                   generator=torch.Generator().manual_seed(0))
+
+
+@pytest.mark.parametrize("layout", ["packed", "mosaic"])
+def test_crops_of_a_full_frame_get_that_frames_fixed_patterns(layout):
+    """With frame_shape and offsets, each patch gets the crop of the full frame's fixed pattern: with no temporal
+    noise (gaussian sigma 0) the torch patch equals the same crop of the numpy full-frame sample, exactly."""
+    m = model_from_entry({"type": "composite", "base": {"type": "gaussian", "sigma": 0.0}, "sensor_seed": 4,
+                          "effects": [{"type": "prnu", "sigma": 0.05}, {"type": "column_fpn", "sigma": 0.01},
+                                      {"type": "dsnu", "sigma": 0.01},
+                                      {"type": "periodic_pattern", "amplitude": 0.01, "period_px": 5.0,
+                                       "random_phase": False, "phase": 0.3},
+                                      {"type": "hot_pixels", "hot_fraction": 0.05, "stuck_fraction": 0.02}]})
+    fh, fw = 40, 64
+    full = _clean(fh, fw, 0.1, 0.7)
+    ref = m.sample(full, COND, np.random.default_rng(0))
+    offs = [(0, 0), (8, 20), (24, 48)]
+    crops = np.stack([full[y:y + 16, x:x + 16] for y, x in offs])
+    c = torch.as_tensor(crops)[:, None]
+    if layout == "packed":
+        c = to_packed(c)
+    y = add_noise(c, m, frame_shape=(fh, fw), offsets=offs, generator=torch.Generator().manual_seed(0))
+    if layout == "packed":
+        y = to_mosaic(y)
+    want = np.stack([ref[oy:oy + 16, ox:ox + 16] for oy, ox in offs])
+    np.testing.assert_allclose(y[:, 0].numpy(), want, rtol=0, atol=2e-7)
+
+
+def test_offsets_must_be_even_and_inside_the_frame():
+    m = model_from_entry(MODEL_CASES["composite"])
+    c = torch.full((2, 1, 8, 8), 0.1)
+    for offs in ([(1, 0), (0, 0)], [(0, 0), (0, 60)]):
+        with pytest.raises(NoiseModelError, match="offsets"):
+            add_noise(c, m, frame_shape=(16, 64), offsets=offs)
