@@ -99,19 +99,31 @@ def _pg_host(group: Group, clean: torch.Tensor, ctx: Ctx) -> torch.Tensor:
 
     seed = int(torch.randint(0, 2**62, (1,), generator=ctx.generator))
     rng = np.random.default_rng(seed)
-    mosaic = to_mosaic(clean) if ctx.layout == PACKED else clean
-    src = mosaic[:, 0].detach().contiguous().numpy()
-    out = np.empty_like(src)
+    flat = all((sites(m.beta1) == sites(m.beta1)[0]).all() and (sites(m.beta2) == sites(m.beta2)[0]).all()
+               for m in group.uniq)
+    if flat:  # site-independent parameters: pixel order is irrelevant, no re-layout (G x C*h x w frames)
+        g, c, h, w = clean.shape
+        src = clean.detach().contiguous().reshape(g, c * h, w).numpy()
+    else:
+        mosaic = to_mosaic(clean) if ctx.layout == PACKED else clean
+        src = mosaic[:, 0].detach().contiguous().numpy()
     cond = NoiseCondition(cfa="RGGB", source="clean")
-    for u, model in enumerate(group.uniq):
-        sel = slice(None) if group.shared else np.flatnonzero(group.inv == u)
-        out[sel] = model.sample_stack(src[sel], cond, rng)
-    t = torch.from_numpy(out)[:, None]
+    if group.shared:
+        out = group.uniq[0].sample_stack(src, cond, rng)
+    else:
+        out = np.empty_like(src)
+        for u, model in enumerate(group.uniq):
+            sel = np.flatnonzero(group.inv == u)
+            out[sel] = model.sample_stack(src[sel], cond, rng)
+    t = torch.from_numpy(out)
+    if flat:
+        return t.reshape(clean.shape)
+    t = t[:, None]
     return to_packed(t) if ctx.layout == PACKED else t
 
 
 def _host_ok(clean: torch.Tensor, ctx: Ctx) -> bool:
-    h = clean.shape[-2] * (2 if ctx.layout == "packed" else 1)
+    h = clean.shape[-2] * clean.shape[-3]  # packed: 4h; mosaic: H (even for the stacked frames and CFA cells)
     return clean.device.type == "cpu" and clean.dtype == torch.float32 and h % 2 == 0 and not clean.requires_grad
 
 
