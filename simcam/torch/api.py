@@ -73,9 +73,10 @@ def add_noise(clean: torch.Tensor, profile_or_model: Any, *, iso: Any = None, ex
         (0,0), (0,1), (1,0), (1,1), as :func:`simcam.cfa.pack`) or mosaic ``[B, 1, H, W]`` whose
         pixel (0, 0) is CFA site (0, 0); any float dtype (half types are computed in float32 where
         ``torch.poisson`` needs it), any device.
-    profile_or_model : NoiseModel, dict, CalibrationProfile, str, Path or NoiseFlow
-        A simcam noise model (all samples), its profile entry, a calibration profile (or the path of
-        its YAML) resolved per sample at ``iso`` (log-ISO interpolation, as ``model_for``), or a
+    profile_or_model : NoiseModel, dict, CalibrationProfile, str, Path, list or NoiseFlow
+        A simcam noise model (all samples), its profile entry, a list of one model (or entry) per
+        sample, a calibration profile (or the path of its YAML) resolved per sample at ``iso``
+        (log-ISO interpolation, as ``model_for``), or a
         trained :class:`simcam.noise.flow.NoiseFlow` (Noise Flow, Abdelhamed, Brubaker, Brown, ICCV 2019).
     iso : float or sequence of B, optional
         ISO of each sample (needed by profiles and Noise Flow).

@@ -116,8 +116,9 @@ def resolve_models(source: Any, batch: int, *, iso: Any = None, camera: Any = No
 
     Parameters
     ----------
-    source : NoiseModel, dict, CalibrationProfile, str or Path
-        A model (all samples), its profile entry, a calibration profile or a profile YAML path.
+    source : NoiseModel, dict, CalibrationProfile, str, Path or list
+        A model (all samples), its profile entry, a calibration profile, a profile YAML path, or a
+        list of one model (or entry) per sample.
     batch : int
         Number of samples.
     iso : float or sequence, optional
@@ -131,6 +132,10 @@ def resolve_models(source: Any, batch: int, *, iso: Any = None, camera: Any = No
     """
     from ..profiles import CalibrationProfile, load_profile
 
+    if isinstance(source, (list, tuple)):
+        if len(source) != batch:
+            raise NoiseModelError(f"profile_or_model: expected one model per sample ({batch}), got {len(source)}")
+        return [model_from_entry(m, where=f"profile_or_model[{i}]") for i, m in enumerate(source)]
     if isinstance(source, (str, Path)):
         source = load_profile(source)
     if isinstance(source, dict):

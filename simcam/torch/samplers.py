@@ -35,7 +35,7 @@ def gaussian(group: Group, clean: torch.Tensor, ctx: Ctx) -> torch.Tensor:
 
 def _nlf_host(group: Group, clean: torch.Tensor, ctx: Ctx):
     """CPU float32 fast path for one NLF with site-independent betas: simcam's fused compiled NLF kernel
-    (one pass, no temporaries), seeded from ``ctx.generator``; None when it does not apply."""
+    (one pass, no temporaries), its numpy generator started from a draw of ``ctx.generator``; None when it does not apply."""
     if not (clean.device.type == "cpu" and clean.dtype == torch.float32 and not clean.requires_grad
             and group.shared and clean.is_contiguous()):
         return None
@@ -91,7 +91,7 @@ def poisson_scaled(clean: torch.Tensor, scale: torch.Tensor, beta2: torch.Tensor
 
 def _pg_host(group: Group, clean: torch.Tensor, ctx: Ctx) -> torch.Tensor:
     """CPU float32 fast path: simcam's own exact sampler (alias tables, compiled kernel) through the public
-    ``NoiseModel.sample_stack``, seeded from ``ctx.generator`` (so still deterministic given it)."""
+    ``NoiseModel.sample_stack``, its numpy generator started from a draw of ``ctx.generator`` (so still deterministic given it)."""
     import numpy as np
 
     from ..noise import NoiseCondition

@@ -174,7 +174,7 @@ cuda = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device 
 
 
 @cuda
-def test_cuda_same_seed_same_tensor_and_same_law():
+def test_cuda_same_generator_state_same_tensor_and_same_law():
     from test_torch_equivalence import _clean as frame, _numpy_frames, _torch_frames, assert_same_law
 
     for name in ("nlf", "poisson_gaussian", "composite"):
@@ -224,3 +224,13 @@ def test_offsets_must_be_even_and_inside_the_frame():
     for offs in ([(1, 0), (0, 0)], [(0, 0), (0, 60)]):
         with pytest.raises(NoiseModelError, match="offsets"):
             add_noise(c, m, frame_shape=(16, 64), offsets=offs)
+
+
+def test_a_list_of_models_mixes_types_in_one_batch():
+    """Samples with models of different structure are noised group by group, each with its own law."""
+    models = [model_from_entry({"type": "gaussian", "sigma": 0.01}), model_from_entry({"type": "gaussian", "sigma": 0.05}),
+              model_from_entry({"type": "nlf", "beta1": 0.0, "beta2": 4e-4})]
+    c = torch.full((3, 4, 64, 64), 0.3, dtype=torch.float64)
+    y = add_noise(c, models, generator=torch.Generator().manual_seed(0))
+    sd = (y - c).flatten(1).std(dim=1).numpy()
+    np.testing.assert_allclose(sd, [0.01, 0.05, 0.02], rtol=5 * np.sqrt(1 / (2 * 4 * 64 * 64)))

@@ -127,7 +127,7 @@ def test_both_cpu_paths(entry, dtype):
 
 
 def test_the_check_detects_a_different_fixed_pattern():
-    """Power check of assert_same_law: another sensor seed (another DSNU pattern) must fail it."""
+    """Power check of assert_same_law: another sensor_seed (another DSNU pattern) must fail it."""
     clean = _clean()
     a = model_from_entry(effect_entry("dsnu"))
     b = a.with_sensor_seed(12)
@@ -147,7 +147,7 @@ def test_the_check_detects_swapped_cfa_sites():
 
 @pytest.mark.parametrize("name", ["nlf", "poisson_gaussian"])
 def test_per_site_variance_is_the_nlf(name):
-    """var(noisy) = beta1 * clean + beta2 per CFA site (seed-independent closed form)."""
+    """var(noisy) = beta1 * clean + beta2 per CFA site (closed form)."""
     e = MODEL_CASES[name]
     level, n = 0.3, 64
     c = torch.full((n, 4, 32, 32), level, dtype=torch.float64)
