@@ -70,7 +70,7 @@ def nlf(group: Group, clean: torch.Tensor, ctx: Ctx) -> torch.Tensor:
     if clean.requires_grad or b1.requires_grad:
         return clean + torch.sqrt((clean * b1 + b2).clamp_min(0)) * z
     sd = torch.addcmul(b2, clean, b1).clamp_min_(0).sqrt_()  # fewer passes and no temporaries
-    return z.mul_(sd).add_(clean)
+    return torch.addcmul(clean, z, sd, out=z)
 
 
 def poisson_scaled(clean: torch.Tensor, scale: torch.Tensor, beta2: torch.Tensor, ctx: Ctx, *, where: str) -> torch.Tensor:

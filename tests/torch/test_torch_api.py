@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from cases import MODEL_CASES, NLF4, PG4
+from torch_cases import MODEL_CASES, NLF4, PG4
 from simcam.cfa import pack, unpack
 from simcam.errors import NoiseModelError, SimcamError
 from simcam.noise import NoiseCondition, model_from_entry

@@ -12,7 +12,7 @@ import pytest
 import torch
 from scipy import stats
 
-from cases import EFFECT_CASES, MODEL_CASES, effect_entry
+from torch_cases import EFFECT_CASES, MODEL_CASES, effect_entry
 from simcam.noise import NoiseCondition, model_from_entry, model_types
 from simcam.noise.effects import effect_types
 from simcam.torch import EFFECTS, NOT_SUPPORTED, SAMPLERS, add_noise, to_mosaic, to_packed
