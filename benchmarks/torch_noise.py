@@ -3,7 +3,8 @@
 Batch: 64 x 4x256x256 packed normalised raw (``--quick``: 16), clean uniform in [0.01, 0.8),
 beta1 / beta2 of a Poisson-Gaussian profile at ISO 800 (``examples/data/loop_profile.yaml``).
 
-CPU rows: ``simcam.torch.add_noise`` for ``nlf``, exact ``poisson_gaussian`` (``torch.poisson``)
+CPU rows: ``simcam.torch.add_noise`` for ``nlf`` (site-independent betas: simcam's fused kernel; per-site
+betas: the torch operations used on CUDA), exact ``poisson_gaussian`` (``torch.poisson``)
 and the loop profile's ``composite`` (ISO 800: Poisson-Gaussian + column FPN, DSNU, black-level
 offset); baselines: the numba NLF kernel (:func:`simcam.noise.nlf_kernel.nlf_noise`, unclipped),
 plain numpy NLF (``clean + sqrt(beta1 clean + beta2) * standard_normal``), the numpy
@@ -100,6 +101,9 @@ def main(argv=None) -> list[tuple]:
     floor = timed(lambda: torch.randn(clean.shape, generator=g), a.repeats)
     row("cpu", "torch.randn (floor)", floor)
     row("cpu", "simcam.torch nlf", timed(lambda: add_noise(clean, nlf, generator=g, validate=False), a.repeats), floor)
+    nlf4 = model_from_entry({"type": "nlf", "beta1": [b1, b1 * 1.01, b1, b1], "beta2": b2})
+    row("cpu", "simcam.torch nlf, torch ops (per-site betas)",
+        timed(lambda: add_noise(clean, nlf4, generator=g, validate=False), a.repeats), floor)
     row("cpu", "simcam.torch poisson_gaussian (exact)",
         timed(lambda: add_noise(clean, pg, generator=g), a.repeats), floor)
     row("cpu", "simcam.torch composite (loop profile, ISO 800)",

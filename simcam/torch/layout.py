@@ -3,14 +3,13 @@
 Packed channels are the 2 x 2 CFA sites in the order (0,0), (0,1), (1,0), (1,1)
 of :mod:`simcam.cfa` (``pack``); the mosaic's pixel (0, 0) is CFA site (0, 0).
 :func:`to_mosaic` / :func:`to_packed` are ``pixel_shuffle`` / ``pixel_unshuffle``
-with factor 2, whose channel index ``2 dy + dx`` is exactly that order.
+with factor 2 (computed as one strided copy), whose channel index ``2 dy + dx`` is exactly that order.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 from ..errors import NoiseModelError
 
@@ -31,15 +30,21 @@ def layout_of(x: torch.Tensor, *, where: str = "clean") -> str:
 
 
 def to_mosaic(x: torch.Tensor) -> torch.Tensor:
-    """Packed ``[B, 4, h, w]`` -> mosaic ``[B, 1, 2h, 2w]``."""
-    return F.pixel_shuffle(x, 2)
+    """Packed ``[B, 4, h, w]`` -> mosaic ``[B, 1, 2h, 2w]`` (= ``pixel_shuffle(x, 2)``; one strided copy)."""
+    b, _, h, w = x.shape
+    out = torch.empty((b, h, 2, w, 2), dtype=x.dtype, device=x.device)
+    out.copy_(x.reshape(b, 2, 2, h, w).permute(0, 3, 1, 4, 2))
+    return out.view(b, 1, 2 * h, 2 * w)
 
 
 def to_packed(x: torch.Tensor) -> torch.Tensor:
     """Mosaic ``[B, 1, H, W]`` (H, W even) -> packed ``[B, 4, H/2, W/2]``."""
     if x.shape[-2] % 2 or x.shape[-1] % 2:
         raise NoiseModelError(f"clean: packing needs an even mosaic height and width, got {x.shape[-2]}x{x.shape[-1]}")
-    return F.pixel_unshuffle(x, 2)
+    b, _, hh, ww = x.shape
+    out = torch.empty((b, 2, 2, hh // 2, ww // 2), dtype=x.dtype, device=x.device)
+    out.copy_(x.reshape(b, hh // 2, 2, ww // 2, 2).permute(0, 2, 4, 1, 3))
+    return out.view(b, 4, hh // 2, ww // 2)
 
 
 def site_tensor(values: np.ndarray, layout: str, shape: tuple[int, int], *, device, dtype) -> torch.Tensor:
