@@ -70,3 +70,7 @@ def require_extra(module: str, extra: str):
         raise OptionalDependencyError(
             f"{module} is needed for this feature: pip install 'simcam[{extra}]' ({exc})"
         ) from None
+
+
+class OutputError(SimcamError):
+    """An output path cannot be written as asked (a folder where a file is expected, a missing folder, an input)."""

@@ -30,6 +30,7 @@ from pydantic import ValidationError
 from .errors import PipelineError, SimcamError
 from .frame import SIGNAL_KINDS, RawFrame
 from .stages.base import Stage, get_stage_class
+from .yamlio import load_yaml
 
 PIPELINE_VERSION = 1
 _FLOATISH = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+$")
@@ -92,12 +93,7 @@ class Pipeline:
             source = str(path)
         else:
             text, source = str(text_or_path), "<yaml>"
-        try:
-            doc = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            mark = getattr(exc, "problem_mark", None)
-            loc = f" line {mark.line + 1}" if mark else ""
-            raise PipelineError(f"{source}:{loc} invalid YAML ({getattr(exc, 'problem', exc)})") from None
+        doc = load_yaml(text, source=source, error=PipelineError)
         return cls.from_dict(doc, source=source)
 
     def to_dict(self) -> dict[str, Any]:

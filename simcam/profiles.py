@@ -36,6 +36,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from .cfa import check_pattern
 from .errors import ProfileError, SimcamError
+from .yamlio import load_yaml
 
 SCHEMA_VERSION = 1
 
@@ -247,11 +248,7 @@ def load_profile(path: str | Path) -> CalibrationProfile:
         text = path.read_text()
     except OSError as exc:
         raise ProfileError(f"{path}: cannot read profile ({exc.strerror})") from None
-    try:
-        doc = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        raise ProfileError(f"{path}:{f' line {mark.line + 1}' if mark else ''} invalid YAML ({getattr(exc, 'problem', exc)})") from None
+    doc = load_yaml(text, source=str(path), error=ProfileError)
     return profile_from_dict(doc, source=str(path))
 
 

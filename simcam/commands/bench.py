@@ -29,6 +29,13 @@ def bench(
     from ..errors import DatasetError
     from ..io.sidd_blocks import read_blocks, read_pair_folder
 
+    from ..io.outputs import check_output_file
+
+    for o, opt in ((json_out, "--json"), (csv_out, "--csv")):
+        if o is not None:
+            check_output_file(o, option=opt, inputs=(noisy, gt))
+    if leaderboard is not None:
+        check_output_file(leaderboard, option="--leaderboard", inputs=(noisy, gt))
     if pairs is not None:
         if noisy or gt:
             raise DatasetError("--pairs: give either --pairs DIR or --noisy/--gt files, not both")

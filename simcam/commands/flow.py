@@ -27,8 +27,11 @@ def export(
     from ..noise.flow.export import export_onnx
     from ..noise.flow.model import NoiseFlow
 
+    from ..io.outputs import check_output_file
+
     if (ckpt is None) == (published_npz is None):
         raise NoiseModelError("flow export: give exactly one of CKPT or --published-npz PATH")
+    check_output_file(out, option="--out", inputs=(ckpt, published_npz), suffixes=(".onnx",))
     if published_npz is not None:
         from ..noise.flow.published import load_published
 
@@ -69,6 +72,9 @@ def train(
     from ..noise.flow.data import load_data, nlf_nll_per_dim, read_nlf_table
     from ..noise.flow.train import train as run
 
+    from ..io.outputs import check_output_dir
+
+    check_output_dir(out, option="--out", inputs=(data, reference_nlf))
     ps = load_data(data, patches_per_image=patches_per_image) if data.is_dir() else load_data(data)
     ref = None
     if reference_nlf is not None:
@@ -97,8 +103,9 @@ def synth_nlf(
     from ..errors import DatasetError
     from ..noise.flow.data import read_nlf_table, save_npz, synthesize_nlf_pairs
 
-    if out.suffix != ".npz":
-        raise DatasetError(f"--out {out}: expected a .npz path")
+    from ..io.outputs import check_output_file
+
+    check_output_file(out, option="--out", inputs=(nlf,), suffixes=(".npz",))
     table = read_nlf_table(nlf)
     cams = cameras.split(",") if cameras else None
     try:

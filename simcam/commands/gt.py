@@ -50,7 +50,14 @@ def gt(
     from ..dataset.groundtruth import Burst, GroundTruthConfig, estimate_ground_truth, load_defect_map, save_defect_map
     from ..errors import DatasetError
 
+    from ..io.outputs import check_output_file
+
     npz, dng = _outputs(output)
+    for o, opt in [(o, "-o") for o in output] + [(save_defects, "--save-defects"), (report, "--report")]:
+        if o is not None:
+            check_output_file(o, option=opt, inputs=(defects,))
+    if save_defects is not None and save_defects.suffix.lower() != ".npz":
+        raise DatasetError(f"{save_defects}: --save-defects: expected a .npz path")
     kw = dict(black_level=black_level, white_level=white_level, nan_policy=nan_policy)
     burst = Burst.from_directory(burst_dir, pattern=pattern, **kw)
     inputs = {p.resolve() for p in map(Path, burst.names)}

@@ -22,6 +22,9 @@ def loop(
     from ..dataset.loop_report import run_and_write
     from ..errors import DatasetError
 
+    from ..io.outputs import check_output_dir
+
+    check_output_dir(out, option="--out", inputs=(capture_dir, start_profile))
     if replicates < 4:
         raise DatasetError(f"--replicates {replicates}: expected >= 4")
     if not 0 < alpha < 1:

@@ -10,15 +10,17 @@ import typer
 profile_app = typer.Typer(help="Noise calibration profiles: import, inspect.", no_args_is_help=True)
 
 
-def _emit(prof, output: Optional[Path], inputs: tuple[Path, ...]) -> None:
-    from ..errors import ProfileError
+def _check(output: Optional[Path], inputs: tuple[Path, ...]) -> None:
+    from ..io.outputs import check_output_file
 
+    if output is not None:
+        check_output_file(output, option="-o", inputs=inputs, suffixes=(".yaml", ".yml"))
+
+
+def _emit(prof, output: Optional[Path]) -> None:
     if output is None:
         typer.echo(prof.to_yaml(), nl=False)
         return
-    for p in inputs:
-        if output.exists() and p.exists() and output.resolve() == p.resolve():
-            raise ProfileError(f"{output}: refusing to overwrite the input file")
     prof.save(output)
     cam = prof.cameras[0]
     typer.echo(f"wrote {output} (camera {cam.id!r}, {len(cam.entries)} ISO entries "
@@ -36,7 +38,8 @@ def import_darktable_cmd(
     """Convert a darktable noise profile (a, b per RGB) to a simcam profile (nlf per ISO)."""
     from ..noise.importers import import_darktable
 
-    _emit(import_darktable(file, camera, cfa=cfa, camera_id=camera_id), output, (file,))
+    _check(output, (file,))
+    _emit(import_darktable(file, camera, cfa=cfa, camera_id=camera_id), output)
 
 
 @profile_app.command("from-dng")
@@ -48,7 +51,8 @@ def from_dng_cmd(
     """Build a one-ISO profile from a DNG's NoiseProfile tag."""
     from ..noise.importers import profile_from_dng
 
-    _emit(profile_from_dng(file, camera_id=camera_id), output, (file,))
+    _check(output, (file,))
+    _emit(profile_from_dng(file, camera_id=camera_id), output)
 
 
 @profile_app.command("show")

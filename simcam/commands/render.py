@@ -13,19 +13,15 @@ def parse_set_options(items: list[str] | None) -> dict:
 
     Values are parsed as YAML (so lists, numbers, booleans and strings work).
     """
-    import yaml
-
     from ..errors import PipelineError
+    from ..yamlio import load_yaml
 
     out = {}
     for item in items or []:
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
             raise PipelineError(f"--set {item!r}: expected STAGE.PARAM=VALUE")
-        try:
-            out[key.strip()] = yaml.safe_load(value)
-        except yaml.YAMLError:
-            raise PipelineError(f"--set {item!r}: VALUE is not valid YAML") from None
+        out[key.strip()] = load_yaml(value, source=f"--set {item!r}: VALUE", error=PipelineError)
     return out
 
 
@@ -41,7 +37,10 @@ def render(
     from ..io.images import resolve_depth, write_image
     from ..pipeline import Pipeline
 
+    from ..io.outputs import check_output_file
+
     overrides = parse_set_options(set_)
+    check_output_file(output, option="-o", inputs=(input,))
     resolve_depth(output, depth)  # fail on a bad format before any work
     pipe = Pipeline.from_yaml(pipeline)
     from ..io.dng import read_dng

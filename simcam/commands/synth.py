@@ -28,6 +28,9 @@ def synth_cmd(
     from ..profiles import load_profile
     from ..stages.noise import Noise
 
+    from ..io.outputs import check_output_dir
+
+    check_output_dir(output, option="-o", inputs=(clean, profile))
     prof = load_profile(profile)
     cam = prof.camera(camera)
     stage = Noise(profile=str(profile), iso=float(iso), camera=cam.id, extrapolate=extrapolate,

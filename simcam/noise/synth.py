@@ -78,6 +78,9 @@ def load_clean(path: str | Path, *, as_: str = "raw", profile=None, camera: str 
         meta.as_shot_neutral = np.ones(3)
     if mosaic.shape[0] % 2 or mosaic.shape[1] % 2:
         raise ImageIOError(f"{path}: expected even height and width for a Bayer mosaic, got {mosaic.shape}")
+    bad = int(np.count_nonzero(~np.isfinite(mosaic)))
+    if bad:
+        raise ImageIOError(f"{path}: pixels: {bad} NaN or infinite samples; expected finite values")
     return RawFrame(np.ascontiguousarray(mosaic, dtype=np.float32), meta, kind="raw")
 
 
