@@ -36,6 +36,7 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
     context_settings=CONTEXT_SETTINGS,
+    rich_markup_mode=None,  # help texts are plain: "SeedSequence([seed, 0, i])" is not rich markup
 )
 
 

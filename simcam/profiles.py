@@ -153,7 +153,7 @@ class CalibrationProfile(BaseModel):
             if not extrapolate:
                 raise ProfileError(
                     f"{where}: iso: {iso:g} is outside the calibrated range [{lo:g}, {hi:g}]; expected an ISO inside "
-                    f"it, or pass extrapolate=True (--extrapolate) to extrapolate linearly in log-ISO")
+                    f"it, or allow extrapolation (simcam synth --extrapolate; extrapolate: true in a noise stage) to extrapolate linearly in log-ISO")
             warnings.warn(f"{where}: ISO {iso:g} is outside the calibrated range [{lo:g}, {hi:g}]: extrapolating "
                           f"linearly in log-ISO", ProfileExtrapolationWarning, stacklevel=2)
             if len(isos) == 1:

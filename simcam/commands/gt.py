@@ -24,7 +24,7 @@ def _outputs(outputs: list[Path]) -> tuple[Optional[Path], Optional[Path]]:
 
 
 def gt(
-    burst_dir: Path = typer.Argument(..., help="Directory of the burst's frames (DNG, or PNG/TIFF for a mono sensor)."),
+    burst_dir: Path = typer.Argument(..., metavar="BURST_DIR", help="Directory of the burst's frames (DNG, or PNG/TIFF for a mono sensor)."),
     output: list[Path] = typer.Option(..., "-o", "--output", help="OUT.npz (gt, sigma, defects, valid) and/or OUT.dng; repeatable."),
     dark: Optional[Path] = typer.Option(None, "--dark", help="Directory of a dark sequence: defective pixels from its mean."),
     flat: Optional[Path] = typer.Option(None, "--flat", help="Directory of a flat sequence: more defective pixels."),

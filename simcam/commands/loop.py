@@ -9,7 +9,7 @@ import typer
 
 
 def loop(
-    capture_dir: Path = typer.Argument(..., help="Capture set: directory of dark*/flat*/scene sequences, or an EMVA 1288 descriptor."),
+    capture_dir: Path = typer.Argument(..., metavar="CAPTURE_DIR", help="Capture set: directory of dark*/flat*/scene sequences, or an EMVA 1288 descriptor."),
     out: Path = typer.Option(..., "--out", help="Output directory (profile.yaml, loop_model.yaml, report.json, report.html)."),
     start_profile: Optional[Path] = typer.Option(None, "--start-profile", help="Start from this profile's models (a profile.yaml or loop_model.yaml written by simcam loop) instead of the base fit."),
     seed: int = typer.Option(0, "--seed", help="Seed of the parametric bootstrap."),

@@ -7,7 +7,8 @@ from typing import Optional
 
 import typer
 
-profile_app = typer.Typer(help="Noise calibration profiles: import, inspect.", no_args_is_help=True)
+profile_app = typer.Typer(help="Noise calibration profiles: import, inspect.", no_args_is_help=True,
+                          rich_markup_mode=None)
 
 
 def _check(output: Optional[Path], inputs: tuple[Path, ...]) -> None:
@@ -18,6 +19,10 @@ def _check(output: Optional[Path], inputs: tuple[Path, ...]) -> None:
 
 
 def _emit(prof, output: Optional[Path]) -> None:
+    notes = getattr(prof.provenance, "notes", "") or ""
+    for note in notes.split("; "):
+        if " skipped: " in note:
+            typer.echo(f"note: {note}", err=True)
     if output is None:
         typer.echo(prof.to_yaml(), nl=False)
         return
@@ -29,7 +34,7 @@ def _emit(prof, output: Optional[Path]) -> None:
 
 @profile_app.command("import-darktable")
 def import_darktable_cmd(
-    file: Path = typer.Argument(..., help="darktable noiseprofiles.json"),
+    file: Path = typer.Argument(..., metavar="FILE", help="darktable noiseprofiles.json"),
     camera: str = typer.Option(..., "--camera", help='Camera as darktable names it: "MAKE MODEL", e.g. "Sony ILCE-7M3".'),
     cfa: str = typer.Option("RGGB", "--cfa", help="Bayer pattern that maps the per-colour values to CFA sites."),
     camera_id: Optional[str] = typer.Option(None, "--id", help="Camera id in the profile (default: MAKE MODEL)."),
@@ -44,7 +49,7 @@ def import_darktable_cmd(
 
 @profile_app.command("from-dng")
 def from_dng_cmd(
-    file: Path = typer.Argument(..., help="DNG with a NoiseProfile tag."),
+    file: Path = typer.Argument(..., metavar="FILE", help="DNG with a NoiseProfile tag."),
     camera_id: Optional[str] = typer.Option(None, "--id", help="Camera id in the profile (default: MAKE MODEL)."),
     output: Optional[Path] = typer.Option(None, "-o", "--output", help="Profile YAML to write (default: stdout)."),
 ) -> None:
@@ -57,7 +62,7 @@ def from_dng_cmd(
 
 @profile_app.command("show")
 def show_cmd(
-    file: Path = typer.Argument(..., help="Profile YAML."),
+    file: Path = typer.Argument(..., metavar="FILE", help="Profile YAML."),
     iso: Optional[float] = typer.Option(None, "--iso", help="Print the (interpolated) model at this ISO."),
     camera: Optional[str] = typer.Option(None, "--camera", help="Camera id."),
     extrapolate: bool = typer.Option(False, "--extrapolate", help="Allow ISOs outside the calibrated range."),

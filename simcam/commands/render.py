@@ -26,7 +26,7 @@ def parse_set_options(items: list[str] | None) -> dict:
 
 
 def render(
-    input: Path = typer.Argument(..., help="Input DNG file."),
+    input: Path = typer.Argument(..., metavar="INPUT", help="Input DNG file."),
     output: Path = typer.Option(..., "-o", "--output", help="Output image (.png, .tif/.tiff, .exr)."),
     pipeline: str = typer.Option("srgb", "--pipeline", "-p", help="Pipeline YAML file or built-in name."),
     set_: Optional[list[str]] = typer.Option(None, "--set", help="Override STAGE.PARAM=VALUE (YAML value); repeatable."),
@@ -48,12 +48,17 @@ def render(
     if overrides:
         pipe = pipe.with_overrides(overrides)
     frame = read_dng(input)
-    out = pipe(frame, seed=seed)
+    from tqdm import tqdm
+
+    # a bar for large frames on a terminal only (disable=None: silent when stderr is not a TTY)
+    with tqdm(total=len(pipe.stages), desc=f"render {input.name}", unit="stage", leave=False,
+              disable=None if frame.width * frame.height >= 4_000_000 else True) as bar:
+        out = pipe(frame, seed=seed, progress=lambda name: (bar.set_postfix_str(name), bar.update(1)))
     write_image(output, out.data, depth=depth, protect=(input,))
     typer.echo(f"wrote {output} ({out.width}x{out.height}, {out.kind}, pipeline {pipe.name or pipe.source})")
 
 
-def validate(pipeline: Path = typer.Argument(..., help="Pipeline YAML file.")) -> None:
+def validate(pipeline: Path = typer.Argument(..., metavar="PIPELINE", help="Pipeline YAML file.")) -> None:
     """Check a pipeline file: stage types, parameters and order."""
     from ..pipeline import Pipeline
 

@@ -9,7 +9,7 @@ import typer
 
 
 def synth_cmd(
-    clean: Path = typer.Argument(..., help="Clean input: DNG, or 16-bit / float32 TIFF or PNG."),
+    clean: Path = typer.Argument(..., metavar="CLEAN", help="Clean input: DNG, or 16-bit / float32 TIFF or PNG."),
     output: Path = typer.Option(..., "-o", "--output", help="Output folder (clean.dng, frame_000.dng, ...)."),
     profile: Path = typer.Option(..., "--profile", help="Calibration profile YAML."),
     iso: float = typer.Option(..., "--iso", help="ISO (interpolated in log-ISO between calibrated ISOs)."),
@@ -35,7 +35,10 @@ def synth_cmd(
     cam = prof.camera(camera)
     stage = Noise(profile=str(profile), iso=float(iso), camera=cam.id, extrapolate=extrapolate,
                   sensor_seed=sensor_seed)
-    frame = load_clean(clean, as_=as_, profile=prof, camera=cam.id, iso=iso, cfa=cfa)
+    notes: list[str] = []
+    frame = load_clean(clean, as_=as_, profile=prof, camera=cam.id, iso=iso, cfa=cfa, notes=notes)
+    for note in notes:
+        typer.echo(f"note: {note}", err=True)
     paths = synth(frame, output, stage=stage, frames=frames, seed=seed, protect=(clean, profile),
                   progress=lambda it: tqdm(it, desc="synth", unit="frame", disable=None))
     typer.echo(f"wrote {len(paths)} DNGs to {output} ({frame.width}x{frame.height}, {cam.id} ISO {iso:g}, "

@@ -20,6 +20,8 @@ from ...frame import CameraMeta, RawFrame
 
 RAW_EXTS = (".dng",)
 IMAGE_EXTS = (".png", ".tif", ".tiff", ".pgm")
+#: File stems of clean references written beside burst frames (simcam synth: clean.dng; simcam gt: gt.*).
+REFERENCE_STEMS = ("clean", "gt")
 
 
 @dataclass
@@ -106,13 +108,15 @@ class Burst:
         their own black/white levels (``black_level``/``white_level`` override).
         Plain images are monochrome DN: ``(DN - black) / (white - black)``;
         ``white_level`` defaults to the sample type's maximum (65535 for 16-bit),
-        ``black_level`` to 0.
+        ``black_level`` to 0. Without ``pattern``, the clean references that ``simcam synth`` and
+        ``simcam gt`` write beside frames (``clean.*``, ``gt.*``) are not frames and are skipped.
         """
         path = Path(path)
         if not path.is_dir():
             raise DatasetError(f"{path}: burst directory not found")
         files = sorted(p for p in (path.glob(pattern) if pattern else path.iterdir())
-                       if p.is_file() and p.suffix.lower() in RAW_EXTS + IMAGE_EXTS)
+                       if p.is_file() and p.suffix.lower() in RAW_EXTS + IMAGE_EXTS
+                       and (pattern or p.stem.lower() not in REFERENCE_STEMS))
         if not files:
             raise DatasetError(f"{path}: no frames found; expected .dng or .png/.tif/.pgm files")
         exts = {p.suffix.lower() in RAW_EXTS for p in files}
