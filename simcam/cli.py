@@ -138,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
     else:
         usage_only = False
     try:
-        app(args=argv, prog_name="simcam", standalone_mode=False)
+        rv = app(args=argv, prog_name="simcam", standalone_mode=False)
     except SimcamError as exc:
         print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
@@ -168,7 +168,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{name}: internal error: {type(exc).__name__}: {message} "
               "(a bug in simcam; run with --debug or SIMCAM_DEBUG=1 for the traceback)", file=sys.stderr)
         return 1
-    return 2 if usage_only else 0
+    if usage_only:
+        return 2
+    return rv if isinstance(rv, int) and not isinstance(rv, bool) else 0
 
 
 def entry() -> None:  # console_scripts target

@@ -98,9 +98,18 @@ def test_internal_error_traceback_with_debug(boom_command, capsys, monkeypatch):
     assert "Traceback" in capsys.readouterr().err
 
 
-def test_render_output_is_an_existing_folder(tmp_path):
-    r = run_cli("render", str(CHART), "-o", str(tmp_path))
-    assert_clean_error(r, 2, str(tmp_path), "-o", "is a folder")
+def test_render_into_an_existing_folder_writes_input_name(tmp_path):
+    """An existing folder as -o is the batch form (``simcam render IN... -o DIR``): DIR/<stem>.png."""
+    r = run_cli("render", str(CHART), "-o", str(tmp_path), "--workers", "0")
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "chart.png").exists()
+
+
+def test_render_output_is_a_file_where_a_folder_is_expected(tmp_path):
+    f = tmp_path / "file"
+    f.write_text("x")
+    r = run_cli("render", str(CHART), str(CHART), "-o", str(f), "--workers", "0")
+    assert_clean_error(r, 2, str(f), "is a file; expected a folder")
 
 
 def test_render_output_folder_missing(tmp_path):

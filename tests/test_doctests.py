@@ -7,7 +7,7 @@ import importlib
 
 import pytest
 
-MODULES = ["simcam.api", "simcam.yamlio", "simcam.io.outputs"]
+MODULES = ["simcam.api", "simcam.yamlio", "simcam.io.outputs", "simcam.io.inputs", "simcam.io.npz", "simcam.batch"]
 
 
 @pytest.mark.parametrize("name", MODULES)

@@ -151,11 +151,11 @@ class GroundTruth:
     report: dict[str, Any] = field(default_factory=dict)
 
     def save_npz(self, path: str | Path) -> Path:
-        """Write ``gt``, ``sigma``, ``defects``, ``valid``, ``n_used`` (compressed npz)."""
-        path = Path(path)
-        np.savez_compressed(path, gt=self.gt, sigma=self.sigma, defects=self.defects, valid=self.valid,
-                            n_used=self.n_used, reference=np.int64(self.reference))
-        return path
+        """Write ``gt``, ``sigma``, ``defects``, ``valid``, ``n_used`` (compressed npz, deterministic bytes)."""
+        from ...io.npz import write_npz
+
+        return write_npz(path, {"gt": self.gt, "sigma": self.sigma, "defects": self.defects, "valid": self.valid,
+                                "n_used": self.n_used, "reference": np.int64(self.reference)})
 
 
 def _bar(progress: bool, total: int, desc: str):
