@@ -124,11 +124,19 @@ def execute(job: Callable[[Any], dict], task: Task) -> Outcome:
     before = {p for p in task.outputs if Path(p).exists()}
     t0 = time.perf_counter()
     try:
-        info = job(task.payload) or {}
+        info = dict(job(task.payload) or {})
     except Exception as exc:  # noqa: BLE001 - every failure becomes one line of the report
         _remove([p for p in task.outputs if p not in before])
         return Outcome(task.key, ok=False, error=one_line(exc), seconds=time.perf_counter() - t0)
+    info["peak_rss_mib"] = _peak_rss_mib()
     return Outcome(task.key, ok=True, seconds=time.perf_counter() - t0, info=info)
+
+
+def _peak_rss_mib() -> float:
+    """Peak resident memory of this process so far (MiB; Linux reports ru_maxrss in KiB)."""
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 def _done(task: Task) -> bool:
@@ -156,12 +164,9 @@ def _client(config: BatchConfig):
         except (OSError, TimeoutError) as exc:
             raise SimcamError(f"--scheduler {address}: cannot reach the dask scheduler ({one_line(exc)})") from None
     workers = config.workers or os.cpu_count() or 1
-    try:
-        import bokeh  # noqa: F401 - the dashboard needs it
+    import importlib.util
 
-        dashboard = "127.0.0.1:0"
-    except ImportError:
-        dashboard = None
+    dashboard = "127.0.0.1:0" if importlib.util.find_spec("bokeh") else None  # the dashboard needs bokeh
     cluster = LocalCluster(n_workers=int(workers), threads_per_worker=int(config.threads_per_worker),
                            processes=True, memory_limit=config.memory_limit, dashboard_address=dashboard,
                            silence_logs=logging.ERROR, env=_worker_env(config.threads_per_worker),
