@@ -197,9 +197,9 @@ def run_batch(job: Callable[[Any], dict], tasks: Sequence[Task], config: BatchCo
     Examples
     --------
     >>> from simcam.batch import BatchConfig, Task, run_batch
-    >>> out = run_batch(len, [Task("a", "abc"), Task("b", [1, 2])], BatchConfig(workers=0, progress=False))
-    >>> [(o.key, o.ok) for o in out]
-    [('a', True), ('b', True)]
+    >>> out = run_batch(dict, [Task("a", {"n": 1}), Task("b", 5)], BatchConfig(workers=0, progress=False))
+    >>> [(o.key, o.ok, o.error) for o in out]
+    [('a', True, None), ('b', False, "TypeError: 'int' object is not iterable")]
     """
     from tqdm import tqdm
 
