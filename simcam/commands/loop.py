@@ -18,8 +18,8 @@ def loop(
     max_size: int = typer.Option(128, "--max-size", help="Centre crop (pixels per side) the loop works on."),
 ) -> None:
     """Fit a noise model to measured frames, find and attribute its residuals, refit, report before/after."""
-    from ..dataset.loop import LoopConfig
-    from ..dataset.loop_report import run_and_write
+    from ..calibration.loop import LoopConfig
+    from ..calibration.report import run_and_write
     from ..errors import DatasetError
 
     from ..io.outputs import check_output_dir

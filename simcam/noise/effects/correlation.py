@@ -24,7 +24,7 @@ either axis) is::
 
 the diagonal one is ``rho(1)^2`` and different-colour neighbours stay
 uncorrelated: the lag-1 / lag-2 statistics of
-``simcam.dataset.diagnostics.lag1_corr`` / ``lag2_corr`` (diluted by the shot
+``simcam.calibration.diagnostics.lag1_corr`` / ``lag2_corr`` (diluted by the shot
 and quantisation noise in the data). Borders reflect about each plane's edge
 pixel. Reference: EMVA 1288 R4.0 sec. 8 (spatial non-white temporal noise).
 """
