@@ -164,3 +164,36 @@ def ground_truth_job(payload: dict) -> dict:
                f"{a['max_shift_px']:.2f} px, {res.report['robust_mean']['fallback_pixels']} fallback pixels; "
                f"wrote {', '.join(written)} and {p['report']}")
     return {"summary": summary, "outputs": written}
+
+
+def loop_job(payload: dict) -> dict:
+    """The calibration loop on one capture set (``simcam loop``): profile, model, report in ``out``.
+
+    Payload keys: ``capture`` (folder or EMVA 1288 descriptor), ``out`` (folder), ``start_profile``
+    (path or None), ``config`` (:class:`~simcam.calibration.loop.LoopConfig` fields).
+
+    Returns
+    -------
+    dict
+        ``{"lines": [...]}``: one summary line per ISO, the EMVA 1288 figures, the files written.
+    """
+    from .calibration.loop import LoopConfig
+    from .calibration.report import run_and_write
+
+    out = Path(payload["out"])
+    start = payload.get("start_profile")
+    doc = run_and_write(Path(payload["capture"]), out, start_profile=None if start is None else Path(start),
+                        cfg=LoopConfig(**payload.get("config", {})))
+    lines = []
+    for g in doc["isos"]:
+        un = ", ".join(u["diagnostic"] for u in g["unexplained"]) or "none"
+        lines.append(f"ISO {g['iso']}: effects {', '.join(g['effects']) or 'none'}; unexplained {un}; "
+                     f"held-out KL {g['heldout']['kl_base']:.3g} -> {g['heldout']['kl_final']:.3g}, "
+                     f"structured KL {g['heldout']['kl_structured_base']:.3g} -> "
+                     f"{g['heldout']['kl_structured_final']:.3g}")
+    if doc.get("emva"):
+        e = doc["emva"]
+        lines.append(f"EMVA 1288: K = {e['K_dn_per_e']:.4f} DN/e-, sigma_d = {e['sigma_dark_e']:.2f} e-")
+    lines.append(f"wrote {out / 'profile.yaml'}, {out / 'loop_model.yaml'}, {out / 'report.json'}, "
+                 f"{out / 'report.html'}")
+    return {"lines": lines}
