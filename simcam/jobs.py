@@ -82,7 +82,8 @@ def synth_patches_job(payload: dict) -> dict:
     frame = load_clean(payload["source"], as_=payload.get("as_", "raw"), profile=prof, camera=cam.id, iso=iso,
                        cfa=payload.get("cfa"))
     stage = Noise(profile=str(payload["profile"]), iso=iso, camera=cam.id,
-                  extrapolate=bool(payload.get("extrapolate", False)), sensor_seed=payload.get("sensor_seed"))
+                  extrapolate=bool(payload.get("extrapolate", False)), sensor_seed=payload.get("sensor_seed"),
+                  exposure_s=payload.get("exposure"))
     noisy = stage(frame, rng).data
     clean = frame.data
     cfa = frame.meta.cfa or "RGGB"

@@ -17,6 +17,9 @@ def synth_cmd(
                                      "set of packed noisy/clean patches (Zarr v3)."),
     profile: Path = typer.Option(..., "--profile", help="Calibration profile YAML."),
     iso: Optional[float] = typer.Option(None, "--iso", help="ISO (interpolated in log-ISO between calibrated ISOs)."),
+    exposure: Optional[float] = typer.Option(None, "--exposure", min=0.0,
+                                             help="Exposure time in seconds (exposure-dependent effects such as "
+                                                  "dark_current; default: the clean DNG's ExposureTime)."),
     isos: Optional[str] = typer.Option(None, "--isos",
                                        help="Training set: comma-separated ISOs, one drawn per source (e.g. 100,800,3200)."),
     camera: Optional[str] = typer.Option(None, "--camera", help="Camera id in the profile (needed if it holds several)."),
@@ -40,7 +43,8 @@ def synth_cmd(
 
     if str(output).rstrip("/").endswith(".zarr"):
         iso_list = _iso_list(iso, isos)
-        raise typer.Exit(_training_set(clean, output, profile=profile, isos=iso_list, camera=camera, seed=seed,
+        raise typer.Exit(_training_set(clean, output, profile=profile, isos=iso_list, exposure=exposure,
+                                       camera=camera, seed=seed,
                                        as_=as_, cfa=cfa, sensor_seed=sensor_seed, extrapolate=extrapolate,
                                        patches=patches, patch_size=patch_size, workers=workers,
                                        scheduler=scheduler, resume=resume))
@@ -63,6 +67,8 @@ def synth_cmd(
                   sensor_seed=sensor_seed)
     notes: list[str] = []
     frame = load_clean(clean_path, as_=as_, profile=prof, camera=cam.id, iso=iso, cfa=cfa, notes=notes)
+    if exposure is not None:
+        frame = frame.evolve(meta=frame.meta.replace(exposure_time_s=float(exposure)))
     for note in notes:
         typer.echo(f"note: {note}", err=True)
     paths = synth(frame, output, stage=stage, frames=frames, seed=seed, protect=(clean_path, profile),
@@ -87,7 +93,7 @@ def _iso_list(iso: Optional[float], isos: Optional[str]) -> list[float]:
     return out
 
 
-def _training_set(inputs, output: Path, *, profile: Path, isos, camera, seed, as_, cfa, sensor_seed, extrapolate,
+def _training_set(inputs, output: Path, *, profile: Path, isos, exposure, camera, seed, as_, cfa, sensor_seed, extrapolate,
                   patches, patch_size, workers, scheduler, resume) -> int:
     from ..batch import BatchConfig, Task, report, run_batch
     from ..errors import SimcamError
@@ -109,7 +115,7 @@ def _training_set(inputs, output: Path, *, profile: Path, isos, camera, seed, as
         prof.entry_for(v, cam.id, extrapolate=extrapolate)
     group = create_store(str(output), sources=[str(s) for s in sources], patches=patches, patch_size=patch_size,
                          overwrite=not resume)
-    base = {"seed": seed, "profile": str(profile), "isos": isos, "camera": cam.id, "extrapolate": extrapolate,
+    base = {"seed": seed, "profile": str(profile), "isos": isos, "exposure": exposure, "camera": cam.id, "extrapolate": extrapolate,
             "sensor_seed": sensor_seed, "as_": as_, "cfa": cfa, "patch_size": patch_size, "patches": patches,
             "store": str(output)}
     tasks = [Task(str(s), {**base, "source": str(s), "index": i},
