@@ -126,17 +126,35 @@ def main(argv: list[str] | None = None) -> int:
     int
         0 on success, 2 for bad input or usage, 1 for an internal error, 130 when interrupted.
     """
-    from .errors import SimcamError
+    import warnings
+
+    from .errors import SimcamWarning
 
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv or os.environ.get("SIMCAM_DEBUG", "") not in ("", "0")
     name = _command_name(argv)
-    ce = _click_exceptions()
     if not argv:  # the help, as a usage error (click < 8.2 would exit 0 here, >= 8.2 exits 2)
         argv = ["--help"]
         usage_only = True
     else:
         usage_only = False
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        # simcam's own warnings: one line each; a library's only with --debug (never raw)
+        if issubclass(category, SimcamWarning) or debug:
+            print(f"{name}: warning: {' '.join(str(message).split())}", file=sys.stderr)
+
+    with warnings.catch_warnings():
+        warnings.showwarning = show
+        warnings.simplefilter("default")
+        return _dispatch(argv, name=name, debug=debug, usage_only=usage_only)
+
+
+def _dispatch(argv: list[str], *, name: str, debug: bool, usage_only: bool) -> int:
+    """Run the app once; map every outcome to (one line on stderr and) an exit status."""
+    from .errors import SimcamError
+
+    ce = _click_exceptions()
     try:
         rv = app(args=argv, prog_name="simcam", standalone_mode=False)
     except SimcamError as exc:
@@ -171,6 +189,8 @@ def main(argv: list[str] | None = None) -> int:
     if usage_only:
         return 2
     return rv if isinstance(rv, int) and not isinstance(rv, bool) else 0
+
+
 
 
 def entry() -> None:  # console_scripts target

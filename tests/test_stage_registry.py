@@ -36,6 +36,7 @@ STAGE_CASES: dict[str, tuple[dict, str]] = {
     "noise": ({"model": {"type": "nlf", "beta1": 1.0e-3, "beta2": 1.0e-5}}, "raw"),
     "clip_raw": ({}, "raw"),
     "highlights": ({"method": "propagate"}, "raw"),
+    "opcodes": ({"list": 2}, "raw"),
 }
 
 
