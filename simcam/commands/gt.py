@@ -55,7 +55,7 @@ def gt(
     """Estimate the noise-free image of a burst: defects, intensity and dense alignment, robust mean."""
     """Estimate the noise-free image of a burst (or of every burst of a folder, on dask):
     defects, intensity and dense alignment, robust mean."""
-    from ..dataset.groundtruth.burst import IMAGE_EXTS, RAW_EXTS
+    from ..dataset.groundtruth.burst import IMAGE_EXTS, RAW_EXTS, is_sidd_frame
     from ..errors import DatasetError
     from ..io.outputs import check_output_file
     from ..jobs import ground_truth_job
@@ -66,7 +66,7 @@ def gt(
                     nan_policy=nan_policy, scratch_dir=_str(scratch_dir))
     frame_exts = RAW_EXTS + IMAGE_EXTS
     single = len(burst_dir) == 1 and (not burst_dir[0].is_dir() or pattern is not None or any(
-        p.is_file() and p.suffix.lower() in frame_exts for p in burst_dir[0].iterdir()))
+        (p.is_file() and p.suffix.lower() in frame_exts) or is_sidd_frame(p) for p in burst_dir[0].iterdir()))
     if not single:
         if len(output) != 1 or output[0].suffix:
             raise DatasetError(f"-o {' '.join(map(str, output))}: several bursts; expected one output folder "
