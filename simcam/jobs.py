@@ -198,3 +198,19 @@ def loop_job(payload: dict) -> dict:
     lines.append(f"wrote {out / 'profile.yaml'}, {out / 'loop_model.yaml'}, {out / 'report.json'}, "
                  f"{out / 'report.html'}")
     return {"lines": lines}
+
+
+def bench_job(payload: dict):
+    """One denoiser on one image's blocks (``simcam bench``): a :class:`~simcam.dataset.benchmark.BenchmarkResult`.
+
+    Payload keys: ``noisy``, ``gt`` (the image's ``[M, H, W(, 3)]`` blocks), ``denoiser`` (spec),
+    ``meta`` (CameraMeta or None), ``pipeline`` (renderer for sRGB scores, with ``meta``), ``cfa``.
+    """
+    from .dataset.benchmark import pipeline_renderer, run_benchmark
+
+    meta = payload.get("meta")
+    renderer = pipeline_renderer(payload["pipeline"]) if meta is not None else None
+    result = run_benchmark([payload["noisy"]], [payload["gt"]], payload["denoiser"],
+                           metas=None if meta is None else [meta], renderer=renderer,
+                           cfa=None if meta is not None else payload.get("cfa"))
+    return {"result": result}

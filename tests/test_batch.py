@@ -125,3 +125,26 @@ def test_batch_without_a_reachable_scheduler_is_one_line(tmp_path):
     r = run_cli("render", CHART, CHART, "-o", tmp_path / "o", "--scheduler", "tcp://127.0.0.1:9")
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and "scheduler" in r.stderr
+
+
+def test_bench_images_x_denoisers_on_two_workers_equals_the_serial_scores(tmp_path):
+    """simcam bench -d none -d nlm --workers 2: per-block scores equal the one-process run's."""
+    import json
+
+    from simcam.io.sidd_blocks import write_blocks
+
+    rng = np.random.default_rng(3)
+    gt = (0.2 + 0.5 * rng.random((3, 2, 1, 1)) + np.zeros((3, 2, 32, 32))).astype(np.float32)
+    noisy = (gt + 0.03 * rng.standard_normal(gt.shape)).astype(np.float32)
+    write_blocks(tmp_path / "noisy.mat", noisy, "ValidationNoisyBlocksRaw", format="v5")
+    write_blocks(tmp_path / "gt.mat", gt, "ValidationGtBlocksRaw", format="v5")
+    common = ["bench", "--noisy", tmp_path / "noisy.mat", "--gt", tmp_path / "gt.mat", "-d", "none", "-d", "nlm"]
+    assert run_cli(*common, "--json", tmp_path / "serial.json").returncode == 0
+    r = run_cli(*common, "--json", tmp_path / "batch.json", "--workers", 2)
+    assert r.returncode == 0, r.stderr
+    a = json.loads((tmp_path / "serial.json").read_text())["results"]
+    b = json.loads((tmp_path / "batch.json").read_text())["results"]
+    for x, y in zip(a, b):
+        assert x["denoiser"] == y["denoiser"] and x["raw"] == y["raw"]
+        strip = [{k: v for k, v in blk.items() if k != "seconds"} for blk in x["per_block"]]
+        assert strip == [{k: v for k, v in blk.items() if k != "seconds"} for blk in y["per_block"]]
