@@ -249,6 +249,10 @@ def load_profile(path: str | Path) -> CalibrationProfile:
     except OSError as exc:
         raise ProfileError(f"{path}: cannot read profile ({exc.strerror})") from None
     doc = load_yaml(text, source=str(path), error=ProfileError)
+    if isinstance(doc, dict):  # measured maps (FILE.npz#KEY) are relative to the profile's folder
+        from .noise.maps import resolve_map_refs
+
+        doc = resolve_map_refs(doc, path.resolve().parent)
     return profile_from_dict(doc, source=str(path))
 
 
