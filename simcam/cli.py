@@ -72,7 +72,36 @@ def _register_commands() -> None:
             importlib.import_module(f"{commands.__name__}.{mod.name}").register(app)
 
 
+def _metavar(annotation) -> str:
+    """A plain metavar for an option's type: PATH, INT, NUM, TEXT ('' for flags: no value to show)."""
+    import typing
+    from pathlib import Path
+
+    while typing.get_origin(annotation) in (typing.Union, list) or str(typing.get_origin(annotation)) == \
+            "<class 'types.UnionType'>":
+        args = [a for a in typing.get_args(annotation) if a is not type(None)]
+        annotation = args[0] if args else str
+    return {bool: "", Path: "PATH", int: "INT", float: "NUM", str: "TEXT"}.get(annotation, "VALUE")
+
+
+def _plain_metavars(typer_app: typer.Typer) -> None:
+    """Options show PATH / INT / NUM / TEXT (typer >= 0.2x would print <path>, <list[str]>, <bool>)."""
+    import inspect
+    import typing
+
+    for info in typer_app.registered_commands:
+        fn = info.callback
+        hints = typing.get_type_hints(fn)
+        for name, param in inspect.signature(fn).parameters.items():
+            d = param.default
+            if isinstance(d, typer.models.OptionInfo) and d.metavar is None:
+                d.metavar = _metavar(hints.get(name, str))
+    for group in typer_app.registered_groups:
+        _plain_metavars(group.typer_instance)
+
+
 _register_commands()
+_plain_metavars(app)
 
 
 def _click_exceptions() -> ModuleType:
