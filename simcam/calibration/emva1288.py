@@ -63,6 +63,17 @@ R4_DIFFERENCES = {
         "sigma_y^2 = mean((y_A - y_B)^2)/2 - (mu_A - mu_B)^2/2 used by emva1288."),
     "dark_current": (
         "computed from two distinct exposure times on; emva1288 requires more than two."),
+    "temporal_dark_noise": (
+        "R4.0 takes sigma_y.dark^2 from the dark measurement at the shortest exposure time; "
+        "emva1288 1.0.2 extrapolates a line over all dark exposure times to 0 s (three or more "
+        "exposure times).  dark_noise='intercept' reproduces emva1288."),
+    "illumination_correction": (
+        "R4.0 Sec. 8.1 high-pass (7x7 box, 11x11 box, 3x3 binomial) is available as an option; "
+        "emva1288 1.0.2 computes the spatial variances unfiltered and high-passes (5x5 box) "
+        "only the PRNU histogram."),
+    "defect_histograms": (
+        "fixed number of equal bins over the deviation range; emva1288 and R4.0 use an integer "
+        "bin width of the summed image with at most 256 bins."),
 }
 
 
@@ -168,7 +179,10 @@ class Spectrogram:
     ``frequency`` in cycles/pixel (0 ... 0.5); ``amplitude`` is the square root of the power
     spectrum averaged over the lines, in the unit of the non-uniformity (e- for DSNU, % for
     PRNU); ``temporal_floor`` is the level of the residual temporal noise of the averaged
-    frames (sqrt(sigma_stack^2 / L) in the same unit), a white floor in the spectrogram.
+    frames (sqrt(sigma_stack^2 / L) in the same unit), a white floor in the spectrogram;
+    ``nonuniformity`` the DSNU1288 / PRNU1288 value, ``stack_noise`` the temporal noise of one
+    frame sigma_y.stack and ``measured`` the uncorrected spatial standard deviation s_y.measured,
+    the reference lines R4.0 draws in the spectrogram plots.
     """
 
     direction: str
@@ -177,6 +191,8 @@ class Spectrogram:
     unit: str
     temporal_floor: float
     nonuniformity: float | None
+    stack_noise: float = math.nan
+    measured: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -457,7 +473,8 @@ def _stream(points: Iterable[OperatingPoint], cfa: str | None) -> tuple[dict, li
 
 def characterise(points: Iterable[OperatingPoint], *, cfa: str | None = None,
                  histogram_bins: int = 256, threshold_multiples: tuple = (3.0, 5.0, 10.0),
-                 prnu_highpass: int | None = None) -> Emva1288Report:
+                 dark_noise: Literal["shortest", "intercept"] = "shortest",
+                 illumination_correction: bool = False) -> Emva1288Report:
     """EMVA 1288 R4.0 Linear evaluation of streamed operating points.
 
     Parameters
@@ -472,9 +489,16 @@ def characterise(points: Iterable[OperatingPoint], *, cfa: str | None = None,
     threshold_multiples : tuple of float
         The histograms count pixels deviating by more than these multiples of the spatial
         standard deviation (DSNU in e-, PRNU in %).
-    prnu_highpass : int or None
-        Side of the box high-pass applied before the PRNU histogram (Release 3.x used 5 to
-        remove illumination shading); None evaluates the unfiltered deviations.
+    dark_noise : {"shortest", "intercept"}
+        Where the temporal dark variance sigma_y.dark^2 is taken when dark points exist at
+        several exposure times: ``shortest`` (R4.0 Linear: the measurement at the shortest
+        exposure time) or ``intercept`` (the linear fit of sigma_y.dark^2 over the exposure
+        time extrapolated to 0 s, as emva1288 1.0.2 does with three or more exposure times).
+    illumination_correction : bool
+        Apply the R4.0 Sec. 8.1 high-pass filter (7x7 box, 11x11 box and 3x3 binomial
+        smoothing subtracted, border of 9 pixels dropped) to the averaged images before the
+        spatial variances, spectrograms and histograms; the residual temporal variance is
+        scaled by the filter's noise gain.  Off by default (uniform illumination).
 
     Returns
     -------
@@ -483,7 +507,8 @@ def characterise(points: Iterable[OperatingPoint], *, cfa: str | None = None,
     stats, names = _stream(points, cfa)
     return Emva1288Report({n: characterise_stats(stats[n], channel=n, histogram_bins=histogram_bins,
                                                  threshold_multiples=threshold_multiples,
-                                                 prnu_highpass=prnu_highpass)
+                                                 dark_noise=dark_noise,
+                                                 illumination_correction=illumination_correction)
                            for n in names}, None if cfa is None else str(cfa).upper())
 
 
@@ -568,8 +593,8 @@ def _na_split(unit: str, reason: str) -> NonUniformity:
     return NonUniformity(q, q, q, q, {})
 
 
-def _spectrogram(img: np.ndarray, direction: str, scale: float, unit: str,
-                 floor_var: float, nonuni: float | None) -> Spectrogram:
+def _spectrogram(img: np.ndarray, direction: str, scale: float, unit: str, floor_var: float,
+                 nonuni: float | None, stack_noise: float, measured: float) -> Spectrogram:
     """Power spectrum per line, averaged over lines (EMVA 1288 R4.0 Linear, spectrograms).
 
     ``horizontal``: FFT along each row; ``vertical``: along each column.  Rows are processed
@@ -585,17 +610,35 @@ def _spectrogram(img: np.ndarray, direction: str, scale: float, unit: str,
         acc += np.sum(f.real ** 2 + f.imag ** 2, axis=0)
     power = acc / (n_lines * n)   # DN^2 per frequency; white noise of variance s2 gives s2
     return Spectrogram(direction, np.arange(n // 2 + 1) / n, np.sqrt(power) * scale, unit,
-                       math.sqrt(max(floor_var, 0.0)) * scale, nonuni)
+                       math.sqrt(max(floor_var, 0.0)) * scale, nonuni, stack_noise, measured)
 
 
-def _box_highpass(img: np.ndarray, size: int) -> np.ndarray:
-    """img minus its size x size box mean (valid region only)."""
-    if size < 3 or size % 2 == 0:
-        raise Emva1288Error(f"prnu_highpass={size}; expected an odd box size >= 3 or None")
-    c = np.cumsum(np.cumsum(np.pad(img, ((1, 0), (1, 0))), axis=0), axis=1)
-    box = (c[size:, size:] - c[:-size, size:] - c[size:, :-size] + c[:-size, :-size]) / size ** 2
-    h = size // 2
-    return img[h:-h, h:-h] - box
+def _illumination_kernel() -> np.ndarray:
+    """1-D smoothing kernel of the uneven-illumination correction (EMVA 1288 R4.0 Linear, Sec. 8.1):
+    a 7x7 box, an 11x11 box and a 3x3 binomial filter in cascade (separable, 19 taps)."""
+    k = np.convolve(np.ones(7) / 7, np.ones(11) / 11)
+    return np.convolve(k, np.array([1.0, 2.0, 1.0]) / 4)
+
+
+def _highpass(img: np.ndarray) -> np.ndarray:
+    """img minus its R4.0 Sec. 8.1 smoothing, on the region the 19x19 kernel fully covers."""
+    from scipy.ndimage import correlate1d
+
+    k = _illumination_kernel()
+    h = k.size // 2
+    if min(img.shape) <= 2 * h + 2:
+        raise Emva1288Error(f"spatial image shape={img.shape}; expected both sides > {2 * h + 2} "
+                            "pixels for the uneven-illumination correction")
+    smooth = correlate1d(correlate1d(img, k, axis=0, mode="nearest"), k, axis=1, mode="nearest")
+    return (img - smooth)[h:-h, h:-h]
+
+
+def _highpass_noise_gain() -> float:
+    """Variance gain sum((delta - h)^2) of the high-pass for white (temporal) noise."""
+    k = _illumination_kernel()
+    h2 = np.outer(k, k)
+    c = k.size // 2
+    return float(1.0 - 2.0 * h2[c, c] + np.sum(h2 ** 2))
 
 
 def _histogram(name: str, dev: np.ndarray, unit: str, bins: int, multiples) -> DefectHistogram:
@@ -616,8 +659,11 @@ def _histogram(name: str, dev: np.ndarray, unit: str, bins: int, multiples) -> D
 
 def characterise_stats(stats: list[PointStats], *, channel: str = "Y", histogram_bins: int = 256,
                        threshold_multiples: tuple = (3.0, 5.0, 10.0),
-                       prnu_highpass: int | None = None) -> ChannelResult:
+                       dark_noise: str = "shortest",
+                       illumination_correction: bool = False) -> ChannelResult:
     """Evaluate the streamed statistics of one channel (see :func:`characterise`)."""
+    if dark_noise not in ("shortest", "intercept"):
+        raise Emva1288Error(f"dark_noise={dark_noise!r}; expected 'shortest' or 'intercept'")
     notes: list[str] = []
     darks_t = [s for s in stats if s.kind == "dark" and s.role != "spatial"]
     brights = [s for s in stats if s.kind == "bright" and s.role != "spatial"
@@ -699,10 +745,10 @@ def characterise_stats(stats: list[PointStats], *, channel: str = "Y", histogram
         ok = np.isfinite(dvar)
         if not ok.any():
             why_d = "dark points have one frame each: no temporal variance"
-        elif np.unique(dt[ok]).size >= 3:
-            s2_dark = _fit_line(dt[ok], dvar[ok])[1]   # extrapolated to t_exp = 0
+        elif dark_noise == "intercept" and np.unique(dt[ok]).size >= 3:
+            s2_dark = _fit_line(dt[ok], dvar[ok])[1]   # extrapolated to t_exp = 0 (emva1288)
         else:
-            s2_dark = float(dvar[ok][0])                 # shortest exposure
+            s2_dark = float(dvar[ok][0])                 # shortest exposure (R4.0)
     if s2_dark is not None and s2_dark < DARK_VARIANCE_FLOOR_DN2:
         notes.append(f"temporal dark variance {s2_dark:.4g} DN^2 < {DARK_VARIANCE_FLOOR_DN2} DN^2 "
                      "(quantisation limited): set to 0.24 DN^2, dark noise is an upper limit")
@@ -834,52 +880,65 @@ def characterise_stats(stats: list[PointStats], *, channel: str = "Y", histogram
     sp_bright = next((s for s in stats if s.kind == "bright" and s.mean_map is not None), None)
     spectrograms: dict = {}
     histograms: dict = {}
-    spatial_frames = {"dark": None if sp_dark is None else {"frames": sp_dark.n_frames, "exposure_s": sp_dark.exposure_s},
-                      "bright": None if sp_bright is None else {"frames": sp_bright.n_frames, "exposure_s": sp_bright.exposure_s}}
+    spatial_frames = {k: None if p is None else {"frames": p.n_frames, "exposure_s": p.exposure_s,
+                                                 "shape": list(p.mean_map.shape)}
+                      for k, p in (("dark", sp_dark), ("bright", sp_bright))}
+    gain = _highpass_noise_gain() if illumination_correction else 1.0
+    prep = _highpass if illumination_correction else (lambda im: im)
+    if illumination_correction:
+        notes.append("spatial evaluation on high-pass filtered averages (R4.0 Sec. 8.1 uneven-illumination "
+                     f"correction; residual temporal variance scaled by the filter gain {gain:.4f})")
+    kk = 1.0 / K if K is not None else math.nan
+    comps = ("total", "row", "column", "pixel")
     if sp_dark is None:
         why = "no dark operating point with two or more frames for the spatial evaluation"
         dsnu_e, dsnu_dn = _na_split("e-", why), _na_split("DN", why)
         vd = None
     else:
-        vd = _spatial_variances(sp_dark.mean_map, sp_dark.var_stack, sp_dark.n_frames)
-        kk = 1.0 / K if K is not None else math.nan
-        dsnu_dn = NonUniformity(*(_sqrt_q(vd[c], 1.0, "DN", f"DSNU {c}") for c in ("total", "row", "column", "pixel")), vd)
+        dimg = prep(sp_dark.mean_map)
+        vd = _spatial_variances(dimg, sp_dark.var_stack * gain, sp_dark.n_frames)
+        vd["mean"] = sp_dark.mean
+        dsnu_dn = NonUniformity(*(_sqrt_q(vd[c], 1.0, "DN", f"DSNU {c}") for c in comps), vd)
         if K is None:
             dsnu_e = _na_split("e-", why_K)
         else:
-            dsnu_e = NonUniformity(*(_sqrt_q(vd[c], kk, "e-", f"DSNU {c}") for c in ("total", "row", "column", "pixel")), vd)
+            dsnu_e = NonUniformity(*(_sqrt_q(vd[c], kk, "e-", f"DSNU {c}") for c in comps), vd)
         unit, scale = ("e-", kk) if K is not None else ("DN", 1.0)
+        total = (dsnu_e if K is not None else dsnu_dn).total.value
         for direction in ("horizontal", "vertical"):
             spectrograms[f"dsnu_{direction}"] = _spectrogram(
-                sp_dark.mean_map, direction, scale, unit, vd["stack"] / vd["L"],
-                (dsnu_e if K is not None else dsnu_dn).total.value)
-        histograms["dsnu"] = _histogram("dsnu", (sp_dark.mean_map - vd["mean"]) * scale, unit,
+                dimg, direction, scale, unit, vd["stack"] / vd["L"], total,
+                math.sqrt(sp_dark.var_stack) * scale, math.sqrt(vd["measured"]) * scale)
+        histograms["dsnu"] = _histogram("dsnu", (dimg - dimg.mean()) * scale, unit,
                                         histogram_bins, threshold_multiples)
     if sp_bright is None or sp_dark is None:
         why = ("no bright operating point with two or more frames for the spatial evaluation"
                if sp_bright is None else "no dark spatial point to subtract")
         prnu = _na_split("%", why)
+    elif sp_bright.mean_map.shape != sp_dark.mean_map.shape:
+        prnu = _na_split("%", "bright and dark spatial points have different frame shapes")
     else:
         if not math.isclose(sp_bright.exposure_s, sp_dark.exposure_s, rel_tol=1e-6):
             notes.append(f"spatial dark point exposure {sp_dark.exposure_s:g} s differs from the "
                          f"bright one {sp_bright.exposure_s:g} s")
-        vb = _spatial_variances(sp_bright.mean_map, sp_bright.var_stack, sp_bright.n_frames)
-        denom = vb["mean"] - vd["mean"]
+        bimg = prep(sp_bright.mean_map)
+        vb = _spatial_variances(bimg, sp_bright.var_stack * gain, sp_bright.n_frames)
+        denom = sp_bright.mean - sp_dark.mean
         if denom <= 0:
             prnu = _na_split("%", f"bright spatial mean minus dark mean = {denom:.4g} DN is not positive")
         else:
-            diff = {c: vb[c] - vd[c] for c in ("total", "row", "column", "pixel")}
-            prnu = NonUniformity(*(_sqrt_q(diff[c], 100.0 / denom, "%", f"PRNU {c}")
-                                   for c in ("total", "row", "column", "pixel")),
+            diff = {c: vb[c] - vd[c] for c in comps}
+            prnu = NonUniformity(*(_sqrt_q(diff[c], 100.0 / denom, "%", f"PRNU {c}") for c in comps),
                                  {"bright": vb, "dark": vd})
-            img = sp_bright.mean_map - sp_dark.mean_map
+            img = bimg - dimg
             floor = vb["stack"] / vb["L"] + vd["stack"] / vd["L"]
             for direction in ("horizontal", "vertical"):
-                spectrograms[f"prnu_{direction}"] = _spectrogram(img, direction, 100.0 / denom, "%",
-                                                                 floor, prnu.total.value)
-            hp = img if prnu_highpass is None else _box_highpass(img, int(prnu_highpass))
-            dev = (hp - hp.mean()) * (100.0 / denom)
-            histograms["prnu"] = _histogram("prnu", dev, "%", histogram_bins, threshold_multiples)
+                spectrograms[f"prnu_{direction}"] = _spectrogram(
+                    img, direction, 100.0 / denom, "%", floor, prnu.total.value,
+                    math.sqrt(sp_bright.var_stack) * 100.0 / denom,
+                    math.sqrt(max(vb["measured"] - vd["measured"], 0.0)) * 100.0 / denom)
+            histograms["prnu"] = _histogram("prnu", (img - img.mean()) * (100.0 / denom), "%",
+                                            histogram_bins, threshold_multiples)
 
     ptc = PhotonTransferData(texp, phot, mu_b, var, dm, dv, sat_i, None if fit_hi is None else (0, fit_hi),
                              lin_idx, lin_dev, lin_fit, dt, dmu, dvar)

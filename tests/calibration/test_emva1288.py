@@ -94,7 +94,7 @@ def sim():
 
 def test_simulator_matches_emva1288_and_truth(sim, emva_np):
     cam, pts, maps = sim
-    r = _ours(pts)
+    r = _ours(pts, dark_noise="intercept")   # emva1288's choice of sigma_y.dark
     e = _theirs(pts, *emva_np)
     # Same frames, same formulas: agreement to rounding (reported in the comparison table).
     same = {
@@ -135,6 +135,12 @@ def test_simulator_matches_emva1288_and_truth(sim, emva_np):
     assert 0.9 * 9000 < r.saturation_capacity_e.value <= 9000
     assert r.snr_max.value == pytest.approx(math.sqrt(r.saturation_capacity_e.value))
     json.dumps(r.to_dict())
+    # R4.0 default: sigma_y.dark^2 of the shortest dark exposure (two-frame formula)
+    a, b = (f.astype(np.float64) for f in next(p[3] for p in pts if p[0] == "dark"))
+    s2 = np.mean((a - b) ** 2) / 2 - (a.mean() - b.mean()) ** 2 / 2
+    r4 = _ours(pts)
+    assert r4.dark_noise_dn.value == pytest.approx(math.sqrt(s2), rel=1e-9)
+    assert r4.dark_noise_e.value == pytest.approx(math.sqrt(s2 - 1 / 12) / r4.system_gain.value, rel=1e-9)
 
 
 def test_ccd_set_matches_published_emva1288_results(shared_file):
@@ -145,7 +151,7 @@ def test_ccd_set_matches_published_emva1288_results(shared_file):
                           None if s.kind == "dark" else s.photons,
                           role="spatial" if s.frames.shape[0] > 2 else "temporal")
            for s in cs.sequences]
-    r = characterise(ops).mono
+    r = characterise(ops, dark_noise="intercept").mono
     # emva1288 1.0.2 on exactly these files (emva1288_v1.0.2_results.txt)
     assert r.system_gain.value == pytest.approx(0.2800626484911438, rel=1e-6)
     assert r.dark_noise_e.value == pytest.approx(10.924397786720915, rel=1e-6)
@@ -170,6 +176,15 @@ def test_ccd_set_matches_published_emva1288_results(shared_file):
     s = 3.0731043140450693 / 0.2800626484911438
     assert r.sensitivity_threshold_e.value == pytest.approx(math.sqrt(s * s + 0.25) + 0.5, rel=1e-6)
     assert r.dynamic_range_db.value == pytest.approx(61.73397395075497, abs=0.02)
+    # R4.0 default: the dark variance of the shortest dark exposure (0.1 % above the intercept)
+    dark0 = min((s for s in cs.sequences if s.kind == "dark"), key=lambda s: s.exposure_s)
+    a, b = dark0.frames.astype(np.float64)
+    s2 = np.mean((a - b) ** 2) / 2 - (a.mean() - b.mean()) ** 2 / 2
+    ops = [OperatingPoint(o.kind, o.exposure_s, frames_of(s.frames), o.photons, o.role)
+           for o, s in zip(ops, cs.sequences)]
+    r4 = characterise(ops).mono
+    assert r4.dark_noise_dn.value == pytest.approx(math.sqrt(s2), rel=1e-9)
+    assert r4.dark_noise_e.value == pytest.approx(10.924397786720915, rel=2e-3)
 
 
 def test_eight_bit_sub_code_dark_noise_and_two_frame_points():
@@ -259,3 +274,29 @@ def test_cfa_channels_have_their_own_gain():
         assert rep[name].quantum_efficiency.value == pytest.approx(50.0, rel=0.12), name
     with pytest.raises(Emva1288Error, match="cfa="):
         characterise(pts[:1], cfa="RGB")
+
+
+def test_illumination_correction_removes_shading():
+    """A smooth +-10 % illumination ramp on top of a 1 % white PRNU map: uncorrected, the
+    PRNU is dominated by the ramp; with the R4.0 Sec. 8.1 high-pass it is the white map's
+    std times sqrt(filter noise gain)."""
+    from emva1288.camera.camera import Camera
+    from simcam.calibration.emva1288 import _highpass_noise_gain
+    rng = np.random.default_rng(4)
+    n = 96
+    white = 1 + rng.normal(0, PRNU_REL, (n, n))
+    ramp = 1 + 0.1 * np.linspace(-1, 1, n)[None, :] * np.ones((n, 1))
+    cam = Camera(bit_depth=12, width=n, height=n, K=0.4, blackoffset=20, dark_signal_0=10.0,
+                 sigma2_dark_0=16.0, u_esat=9000.0, seed=4, prnu=white * ramp)
+    rad = cam.get_radiance_for(mean=1600)
+    pts = [OperatingPoint("dark", 1e-3, [cam.grab(0) for _ in range(L_SPATIAL)]),
+           OperatingPoint("bright", 1e-3, [cam.grab(rad) for _ in range(L_SPATIAL)], photons=1e4)]
+    plain = characterise(pts).mono  # frames are lists: read twice
+    assert plain.prnu_percent.total.value > 4.0   # the ramp: 10 %/sqrt(3) = 5.8 %
+    corr = characterise(pts, illumination_correction=True).mono
+    h = 9  # border dropped by the 19-tap filter
+    expected = 100 * np.std(white[h:-h, h:-h]) * math.sqrt(_highpass_noise_gain())
+    # SE of a std over 78^2 pixels ~ 0.8 % (the linear ramp passes the symmetric filter unchanged
+    # in the smoothing, so it cancels in the high-pass): 5 %
+    assert corr.prnu_percent.total.value == pytest.approx(expected, rel=0.05)
+    assert corr.spectrograms["prnu_horizontal"].amplitude.size == (n - 2 * h) // 2 + 1
