@@ -381,6 +381,7 @@ class PointAccumulator:
         self._m2: list[np.ndarray] = []
         self._frame_means: list[list[float]] = [[] for _ in self.channels]
         self._delta: np.ndarray | None = None
+        self._tmp: np.ndarray | None = None
 
     def add(self, frame: np.ndarray) -> None:
         a = np.asarray(frame)
@@ -409,11 +410,14 @@ class PointAccumulator:
             mean, m2 = self._mean[c], self._m2[c]
             if self._delta is None or self._delta.shape != x.shape:
                 self._delta = np.empty(x.shape, np.float64)
-            d = self._delta
-            np.subtract(x, mean, out=d)                 # x - mean_{n-1}
-            mean += d / self.n                          # mean_n
-            np.multiply(d, np.subtract(x, mean), out=d)  # (x - mean_{n-1}) (x - mean_n)
-            m2 += d
+                self._tmp = np.empty(x.shape, np.float64)
+            d, t = self._delta, self._tmp
+            np.subtract(x, mean, out=d)          # x - mean_{n-1}
+            np.divide(d, self.n, out=t)
+            mean += t                            # mean_n
+            np.subtract(x, mean, out=t)          # x - mean_n
+            t *= d
+            m2 += t                              # Welford update, no temporaries
             self._frame_means[c].append(float(np.mean(x, dtype=np.float64)))
 
     def finish(self, keep_map: bool = True) -> list[PointStats]:
@@ -432,7 +436,7 @@ class PointAccumulator:
                                   None if self.point.photons is None else float(self.point.photons),
                                   self.point.role, self.n, float(mean_map.mean()), var_t, var_stack,
                                   mean_map if keep_map else None, mean_map.shape))
-        self._mean, self._m2, self._delta = [], [], None
+        self._mean, self._m2, self._delta, self._tmp = [], [], None, None
         return out
 
 
@@ -641,20 +645,43 @@ def _highpass_noise_gain() -> float:
     return float(1.0 - 2.0 * h2[c, c] + np.sum(h2 ** 2))
 
 
-def _histogram(name: str, dev: np.ndarray, unit: str, bins: int, multiples) -> DefectHistogram:
+def _grid_step(avg: np.ndarray, L: int) -> float | None:
+    """1/L when ``avg`` is the mean of L integer-valued frames (values on a 1/L DN grid)."""
+    y = avg * L
+    return 1.0 / L if np.allclose(y, np.round(y), rtol=0, atol=1e-6 * max(1.0, L)) else None
+
+
+def _histogram(name: str, dev: np.ndarray, unit: str, bins: int, multiples,
+               scale: float = 1.0, grid: float | None = None) -> DefectHistogram:
+    """Histogram of the deviations ``dev`` (DN), reported in ``unit`` (``dev * scale``).
+
+    When the averaged image lives on a grid of 1/L DN (integer frames), the bin width is a whole
+    number of grid steps with edges between grid values, as EMVA 1288 prescribes (at most
+    ``bins`` bins), so no bin is systematically empty; otherwise ``bins`` equal bins.
+    """
     dev = dev.ravel()
     lo, hi = float(dev.min()), float(dev.max())
-    if hi <= lo:
-        hi = lo + 1e-12
-    counts, edges = np.histogram(dev, bins=bins, range=(lo, hi))
+    if grid is not None and hi > lo:
+        steps = int(round((hi - lo) / grid))
+        w = steps // bins + 1
+        nb = steps // w + 1
+        edges = lo - grid / 2 + grid * w * np.arange(nb + 1)
+    else:
+        if hi <= lo:
+            hi = lo + 1e-12
+        edges = np.linspace(lo, hi, bins + 1)
+    counts, edges = np.histogram(dev, bins=edges)
     ad = np.abs(dev)
     amax = float(ad.max()) if ad.size else 0.0
     abs_edges = np.linspace(0.0, amax if amax > 0 else 1e-12, bins + 1)
     hist_abs, _ = np.histogram(ad, bins=abs_edges)
     acc = 100.0 * np.cumsum(hist_abs[::-1])[::-1] / ad.size
-    std = float(dev.std())
-    beyond = {float(k * std): int(np.count_nonzero(ad > k * std)) for k in multiples} if std > 0 else {}
-    return DefectHistogram(name, unit, edges, counts, abs_edges[:-1], acc, beyond, std, int(ad.size))
+    sc = abs(scale)
+    std = float(dev.std()) * sc
+    beyond = ({float(k * std): int(np.count_nonzero(ad * sc > k * std)) for k in multiples}
+              if std > 0 else {})
+    return DefectHistogram(name, unit, edges * scale, counts, abs_edges[:-1] * sc, acc, beyond,
+                           std, int(ad.size))
 
 
 def characterise_stats(stats: list[PointStats], *, channel: str = "Y", histogram_bins: int = 256,
@@ -909,8 +936,9 @@ def characterise_stats(stats: list[PointStats], *, channel: str = "Y", histogram
             spectrograms[f"dsnu_{direction}"] = _spectrogram(
                 dimg, direction, scale, unit, vd["stack"] / vd["L"], total,
                 math.sqrt(sp_dark.var_stack) * scale, math.sqrt(vd["measured"]) * scale)
-        histograms["dsnu"] = _histogram("dsnu", (dimg - dimg.mean()) * scale, unit,
-                                        histogram_bins, threshold_multiples)
+        grid = None if illumination_correction else _grid_step(sp_dark.mean_map, sp_dark.n_frames)
+        histograms["dsnu"] = _histogram("dsnu", dimg - dimg.mean(), unit, histogram_bins,
+                                        threshold_multiples, scale, grid)
     if sp_bright is None or sp_dark is None:
         why = ("no bright operating point with two or more frames for the spatial evaluation"
                if sp_bright is None else "no dark spatial point to subtract")
@@ -937,8 +965,11 @@ def characterise_stats(stats: list[PointStats], *, channel: str = "Y", histogram
                     img, direction, 100.0 / denom, "%", floor, prnu.total.value,
                     math.sqrt(sp_bright.var_stack) * 100.0 / denom,
                     math.sqrt(max(vb["measured"] - vd["measured"], 0.0)) * 100.0 / denom)
-            histograms["prnu"] = _histogram("prnu", (img - img.mean()) * (100.0 / denom), "%",
-                                            histogram_bins, threshold_multiples)
+            grid = None
+            if not illumination_correction and sp_bright.n_frames == sp_dark.n_frames:
+                grid = _grid_step(img, sp_bright.n_frames)
+            histograms["prnu"] = _histogram("prnu", img - img.mean(), "%", histogram_bins,
+                                            threshold_multiples, 100.0 / denom, grid)
 
     ptc = PhotonTransferData(texp, phot, mu_b, var, dm, dv, sat_i, None if fit_hi is None else (0, fit_hi),
                              lin_idx, lin_dev, lin_fit, dt, dmu, dvar)
