@@ -741,6 +741,9 @@ def characterise_stats(stats: list[PointStats], *, channel: str = "Y", histogram
         # Saturation: the maximum of the photon transfer curve (R4.0 Linear, saturation).
         sat_i = int(np.argmax(var_sig))
         s_sat = float(sig[sat_i])
+        if sat_i == sig.size - 1:
+            notes.append("the photon-transfer maximum is the brightest point: saturation may not "
+                         "have been reached, the brightest point is taken as saturation")
         if s_sat <= 0:
             why_K = f"saturation signal mu_y.sat - mu_y.dark = {s_sat:.4g} DN is not positive"
         else:

@@ -337,15 +337,17 @@ def test_twelve_megapixel_stream_in_bounded_memory():
 
     def frames(level):
         for _ in range(16):
-            yield (rng.poisson(level, shape) + 64).astype(np.uint16)
+            yield (rng.poisson(4.0 + level, shape) + 64).astype(np.uint16)  # 4 e- dark signal
 
     tracemalloc.start()
-    r = characterise([OperatingPoint("dark", 0.01, frames(4.0)),
+    r = characterise([OperatingPoint("dark", 0.01, frames(0.0)),
+                      OperatingPoint("bright", 0.01, frames(200.0), photons=400.0),
                       OperatingPoint("bright", 0.01, frames(400.0), photons=800.0)]).mono
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
     map_bytes = 8 * shape[0] * shape[1]
     assert peak < 10 * map_bytes, peak / map_bytes
-    # Poisson: variance = mean -> K = 1 DN/e- from the two points (SE ~ 0.1 %)
+    # Poisson: variance = mean -> K = 1 DN/e- (SE ~ 0.1 %); QE = 50 %
     assert r.system_gain.value == pytest.approx(1.0, rel=0.01)
+    assert r.quantum_efficiency.value == pytest.approx(50.0, rel=0.01)
     assert r.prnu_percent.total.value is None or r.prnu_percent.total.value < 0.05
