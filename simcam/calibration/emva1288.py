@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Iterable, Iterator, Literal
 
 import numpy as np
@@ -502,7 +502,7 @@ def characterise(points: Iterable[OperatingPoint], *, cfa: str | None = None,
         Apply the R4.0 Sec. 8.1 high-pass filter (7x7 box, 11x11 box and 3x3 binomial
         smoothing subtracted, border of 9 pixels dropped) to the averaged images before the
         spatial variances, spectrograms and histograms; the residual temporal variance is
-        scaled by the filter's noise gain.  Off by default (uniform illumination).
+        scaled by the filter's noise gains.  Off by default (uniform illumination).
 
     Returns
     -------
@@ -558,20 +558,27 @@ def _match_dark(t: float, dt: np.ndarray, dmu: np.ndarray, dvar: np.ndarray):
     return m * t + b, mv * t + bv, "no dark point at its exposure: dark values interpolated linearly in time"
 
 
-def _spatial_variances(avg: np.ndarray, var_stack: float, L: int) -> dict:
+def _spatial_variances(avg: np.ndarray, var_stack: float, L: int,
+                       gains: tuple[float, float] = (1.0, 1.0)) -> dict:
     """Spatial variance and its row / column / pixel split (EMVA 1288 R4.0 Linear, Sec. 8).
 
-    ``avg`` is the average of L frames; the residual temporal variance var_stack / L (and its
-    share in the row and column means) is removed from each component.
+    ``avg`` is the average of L frames; the residual temporal variance var_stack / L of each
+    pixel, var_stack / (L M) of a column mean and var_stack / (L N) of a row mean is removed
+    (R4.0 eqs. for s_y^2, s_y.cav^2, s_y.rav^2), then the three equations
+    s_cav^2 = s_col^2 + s_pix^2/M, s_rav^2 = s_row^2 + s_pix^2/N, s_y^2 = s_col^2 + s_row^2 + s_pix^2
+    are solved for the column, row and pixel variances.  ``gains`` = (g2, g1) scale the
+    residual temporal variances after a high-pass filter: g2 for a pixel, g1 for a row or
+    column mean (white noise through the 2-D and the 1-D filter).
     """
+    g2, g1 = gains
     M, N = avg.shape
     mu = float(avg.mean())
     col_means = avg.mean(axis=0)   # mu_y[n], N values
     row_means = avg.mean(axis=1)   # mu_y[m], M values
     s2_measured = float(np.var(avg, ddof=1))
-    s2 = s2_measured - var_stack / L
-    s2_cav = float(np.mean((col_means - mu) ** 2)) - var_stack / (L * M)
-    s2_rav = float(np.mean((row_means - mu) ** 2)) - var_stack / (L * N)
+    s2 = s2_measured - g2 * var_stack / L
+    s2_cav = float(np.mean((col_means - mu) ** 2)) - g1 * var_stack / (L * M)
+    s2_rav = float(np.mean((row_means - mu) ** 2)) - g1 * var_stack / (L * N)
     den = M * N - M - N
     if den <= 0:
         col = row = pix = math.nan
@@ -580,7 +587,8 @@ def _spatial_variances(avg: np.ndarray, var_stack: float, L: int) -> dict:
         row = (M * N - N) / den * s2_rav - M / den * (s2 - s2_cav)
         pix = M * N / den * (s2 - s2_cav - s2_rav)
     return {"measured": s2_measured, "total": s2, "column_average": s2_cav, "row_average": s2_rav,
-            "column": col, "row": row, "pixel": pix, "mean": mu, "stack": var_stack, "L": L}
+            "column": col, "row": row, "pixel": pix, "mean": mu, "stack": var_stack, "L": L,
+            "residual_gain": g2}
 
 
 def _sqrt_q(v: float, scale: float, unit: str, what: str) -> Quantity:
@@ -637,12 +645,16 @@ def _highpass(img: np.ndarray) -> np.ndarray:
     return (img - smooth)[h:-h, h:-h]
 
 
-def _highpass_noise_gain() -> float:
-    """Variance gain sum((delta - h)^2) of the high-pass for white (temporal) noise."""
+def _highpass_noise_gains() -> tuple[float, float]:
+    """Variance gains (g2, g1) of the high-pass for white temporal noise: g2 = sum((delta - h)^2)
+    for one pixel (2-D kernel h = k k^T), g1 = sum((delta - k)^2) for a row or column mean (the
+    smoothing along the averaged direction drops out of the mean)."""
     k = _illumination_kernel()
-    h2 = np.outer(k, k)
     c = k.size // 2
-    return float(1.0 - 2.0 * h2[c, c] + np.sum(h2 ** 2))
+    h2 = np.outer(k, k)
+    g2 = float(1.0 - 2.0 * h2[c, c] + np.sum(h2 ** 2))
+    g1 = float(1.0 - 2.0 * k[c] + np.sum(k ** 2))
+    return g2, g1
 
 
 def _grid_step(avg: np.ndarray, L: int) -> float | None:
@@ -913,11 +925,12 @@ def characterise_stats(stats: list[PointStats], *, channel: str = "Y", histogram
     spatial_frames = {k: None if p is None else {"frames": p.n_frames, "exposure_s": p.exposure_s,
                                                  "shape": list(p.mean_map.shape)}
                       for k, p in (("dark", sp_dark), ("bright", sp_bright))}
-    gain = _highpass_noise_gain() if illumination_correction else 1.0
+    gains = _highpass_noise_gains() if illumination_correction else (1.0, 1.0)
     prep = _highpass if illumination_correction else (lambda im: im)
     if illumination_correction:
         notes.append("spatial evaluation on high-pass filtered averages (R4.0 Sec. 8.1 uneven-illumination "
-                     f"correction; residual temporal variance scaled by the filter gain {gain:.4f})")
+                     f"correction; residual temporal variances scaled by the filter gains {gains[0]:.4f} per "
+                     f"pixel, {gains[1]:.4f} per row/column mean)")
     kk = 1.0 / K if K is not None else math.nan
     comps = ("total", "row", "column", "pixel")
     if sp_dark is None:
@@ -926,7 +939,7 @@ def characterise_stats(stats: list[PointStats], *, channel: str = "Y", histogram
         vd = None
     else:
         dimg = prep(sp_dark.mean_map)
-        vd = _spatial_variances(dimg, sp_dark.var_stack * gain, sp_dark.n_frames)
+        vd = _spatial_variances(dimg, sp_dark.var_stack, sp_dark.n_frames, gains)
         vd["mean"] = sp_dark.mean
         dsnu_dn = NonUniformity(*(_sqrt_q(vd[c], 1.0, "DN", f"DSNU {c}") for c in comps), vd)
         if K is None:
@@ -937,7 +950,7 @@ def characterise_stats(stats: list[PointStats], *, channel: str = "Y", histogram
         total = (dsnu_e if K is not None else dsnu_dn).total.value
         for direction in ("horizontal", "vertical"):
             spectrograms[f"dsnu_{direction}"] = _spectrogram(
-                dimg, direction, scale, unit, vd["stack"] / vd["L"], total,
+                dimg, direction, scale, unit, vd["residual_gain"] * vd["stack"] / vd["L"], total,
                 math.sqrt(sp_dark.var_stack) * scale, math.sqrt(vd["measured"]) * scale)
         grid = None if illumination_correction else _grid_step(sp_dark.mean_map, sp_dark.n_frames)
         histograms["dsnu"] = _histogram("dsnu", dimg - dimg.mean(), unit, histogram_bins,
@@ -953,7 +966,7 @@ def characterise_stats(stats: list[PointStats], *, channel: str = "Y", histogram
             notes.append(f"spatial dark point exposure {sp_dark.exposure_s:g} s differs from the "
                          f"bright one {sp_bright.exposure_s:g} s")
         bimg = prep(sp_bright.mean_map)
-        vb = _spatial_variances(bimg, sp_bright.var_stack * gain, sp_bright.n_frames)
+        vb = _spatial_variances(bimg, sp_bright.var_stack, sp_bright.n_frames, gains)
         denom = sp_bright.mean - sp_dark.mean
         if denom <= 0:
             prnu = _na_split("%", f"bright spatial mean minus dark mean = {denom:.4g} DN is not positive")
@@ -962,7 +975,7 @@ def characterise_stats(stats: list[PointStats], *, channel: str = "Y", histogram
             prnu = NonUniformity(*(_sqrt_q(diff[c], 100.0 / denom, "%", f"PRNU {c}") for c in comps),
                                  {"bright": vb, "dark": vd})
             img = bimg - dimg
-            floor = vb["stack"] / vb["L"] + vd["stack"] / vd["L"]
+            floor = vb["residual_gain"] * (vb["stack"] / vb["L"] + vd["stack"] / vd["L"])
             for direction in ("horizontal", "vertical"):
                 spectrograms[f"prnu_{direction}"] = _spectrogram(
                     img, direction, 100.0 / denom, "%", floor, prnu.total.value,
