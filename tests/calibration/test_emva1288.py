@@ -11,7 +11,6 @@ import pytest
 
 from simcam.calibration.emva1288 import (
     DARK_VARIANCE_FLOOR_DN2, Emva1288Error, OperatingPoint, PointAccumulator, characterise,
-    frames_of,
 )
 
 emva = pytest.importorskip("emva1288")
@@ -143,15 +142,30 @@ def test_simulator_matches_emva1288_and_truth(sim, emva_np):
     assert r4.dark_noise_e.value == pytest.approx(math.sqrt(s2 - 1 / 12) / r4.system_gain.value, rel=1e-9)
 
 
+def _read_descriptor(desc):
+    """Minimal EMVA 1288 R3 descriptor reader: blocks of ('b'|'d', exposure ns, photons, [png])."""
+    from PIL import Image
+    blocks = []
+    for line in desc.read_text().splitlines():
+        f = line.split()
+        if not f or f[0].startswith("#"):
+            continue
+        if f[0] in ("b", "d"):
+            blocks.append([f[0], float(f[1]) * 1e-9, float(f[2]) if f[0] == "b" else None, []])
+        elif f[0] == "i":
+            blocks[-1][3].append(desc.parent.joinpath(*f[1].replace("\\", "/").split("/")))
+    return [(k, t, p, [np.asarray(Image.open(x)) for x in files]) for k, t, p, files in blocks]
+
+
+def _ccd_points(blocks):
+    return [OperatingPoint("dark" if k == "d" else "bright", t, iter(fr), p,
+                           role="spatial" if len(fr) > 2 else "temporal") for k, t, p, fr in blocks]
+
+
 def test_ccd_set_matches_published_emva1288_results(shared_file):
-    from simcam.dataset.capture import read_emva1288
-    desc = shared_file("emva1288_ccd/EMVA1288_Data.txt")
-    cs = read_emva1288(desc)
-    ops = [OperatingPoint("dark" if s.kind == "dark" else "bright", s.exposure_s, frames_of(s.frames),
-                          None if s.kind == "dark" else s.photons,
-                          role="spatial" if s.frames.shape[0] > 2 else "temporal")
-           for s in cs.sequences]
-    r = characterise(ops, dark_noise="intercept").mono
+    blocks = _read_descriptor(shared_file("emva1288_ccd/EMVA1288_Data.txt"))
+    assert len(blocks) == 102 and blocks[0][3][0].dtype == np.uint16
+    r = characterise(_ccd_points(blocks), dark_noise="intercept").mono
     # emva1288 1.0.2 on exactly these files (emva1288_v1.0.2_results.txt)
     assert r.system_gain.value == pytest.approx(0.2800626484911438, rel=1e-6)
     assert r.dark_noise_e.value == pytest.approx(10.924397786720915, rel=1e-6)
@@ -177,12 +191,10 @@ def test_ccd_set_matches_published_emva1288_results(shared_file):
     assert r.sensitivity_threshold_e.value == pytest.approx(math.sqrt(s * s + 0.25) + 0.5, rel=1e-6)
     assert r.dynamic_range_db.value == pytest.approx(61.73397395075497, abs=0.02)
     # R4.0 default: the dark variance of the shortest dark exposure (0.1 % above the intercept)
-    dark0 = min((s for s in cs.sequences if s.kind == "dark"), key=lambda s: s.exposure_s)
-    a, b = dark0.frames.astype(np.float64)
+    dark0 = min((b for b in blocks if b[0] == "d" and len(b[3]) == 2), key=lambda b: b[1])
+    a, b = (f.astype(np.float64) for f in dark0[3])
     s2 = np.mean((a - b) ** 2) / 2 - (a.mean() - b.mean()) ** 2 / 2
-    ops = [OperatingPoint(o.kind, o.exposure_s, frames_of(s.frames), o.photons, o.role)
-           for o, s in zip(ops, cs.sequences)]
-    r4 = characterise(ops).mono
+    r4 = characterise(_ccd_points(blocks)).mono
     assert r4.dark_noise_dn.value == pytest.approx(math.sqrt(s2), rel=1e-9)
     assert r4.dark_noise_e.value == pytest.approx(10.924397786720915, rel=2e-3)
 
