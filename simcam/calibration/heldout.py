@@ -27,7 +27,7 @@ Effects such as row noise, column FPN, a periodic pattern, frame flicker, crosst
 pixels barely change the one-pixel marginal but dominate marginals of *aggregated* noise (EMVA 1288
 sec. 8: spatial variances of row/column means and of temporal-mean maps; ELD, Wei et al. 2020: row
 means). :func:`structured_kl` computes the same estimator on fixed aggregations of the signed noise
-(frame minus the model's clean level, :func:`simcam.dataset.loop.noise_values`), per sequence and
+(frame minus the model's clean level, :func:`simcam.calibration.loop.noise_values`), per sequence and
 CFA plane, families:
 
 ``pixel``     single values, one histogram per (sequence, plane): the joint law of (group, value),
@@ -67,6 +67,12 @@ N_BINS = 24
 RANGE_SIGMA = 4.0
 STRUCTURED_BINNING = (f"per family: {N_BINS} equal bins over median +- {RANGE_SIGMA:g} x 1.4826 MAD of the held-out "
                       "data's values + 2 open outer bins; forward KL D(data||model), model counts + 1/2 per bin")
+
+#: Noise Flow marginal-KL binning (Noise Flow, Abdelhamed, Brubaker, Brown, ICCV 2019), normalised raw units.
+KL_EDGES = np.concatenate([[-1000.0], np.linspace(-0.1, 0.1, 65), [1000.0]])
+KL_BINNING = ("edges [-1000] + linspace(-0.1, 0.1, 65) + [1000] on normalised raw noise; forward KL D(real||model) "
+              "over the bins the data occupies, model counts + 1/2 per bin (Jeffreys)")
+
 
 
 # ------------------------------------------------------------------ estimator
@@ -248,3 +254,19 @@ def _family(hists: list, n: int) -> dict:
     z = (kl - floor) / sd if sd > 0 else 0.0
     return {"kl": float(kl), "floor": floor, "floor_iid": float(floor_iid), "sd": sd,
             "excess": float(max(kl - floor, 0.0)), "z": float(z), "significant": bool(z > GATE_Z), "n": int(n)}
+
+
+def marginal_kl(real: np.ndarray, model: np.ndarray) -> float:
+    """Forward KL D(real || model) with the Noise Flow binning (:data:`KL_EDGES`), the model's histogram
+    smoothed by half a count per bin (:func:`kl_counts`), so data in bins the
+    simulation leaves empty (a hot-pixel tail) count."""
+    return kl_counts(np.histogram(real, KL_EDGES)[0], np.histogram(model, KL_EDGES)[0])
+
+
+def kl_sampling_floor(real: np.ndarray, model: np.ndarray) -> float:
+    """Expected :func:`marginal_kl` between two samples of the same law with these sizes (exact binomial
+    expectation of the estimator, :func:`kl_floor`, on the pooled histogram;
+    Miller-Madow (B - 1) / 2N + (B - 1) / 2M to second order): differences below it are noise."""
+    n = np.histogram(real, KL_EDGES)[0]
+    m = np.histogram(model, KL_EDGES)[0]
+    return kl_floor(n + m, real.size, model.size)

@@ -1,7 +1,7 @@
 """The loop's parametric bootstrap drawn by simcam's noise stage (``simcam.noise`` composite models).
 
 A thin adapter, no noise physics of its own: the fitted :class:`LoopModel` becomes the
-composite entry of :func:`simcam.dataset.loop_profile.noise_entry` (the one written to
+composite entry of :func:`simcam.calibration.profile.noise_entry` (the one written to
 ``profile.yaml``) plus what the capture's ADC adds to the noise stage's normalised raw:
 
 * per-site black-level differences, as a ``black_level_offset`` (before quantisation);
@@ -9,7 +9,7 @@ composite entry of :func:`simcam.dataset.loop_profile.noise_entry` (the one writ
 * DN = normalised * (white - black) + black, clipped to [0, white].
 
 The expected signal a sequence is simulated from is the measured one taken back through the
-response (:func:`simcam.dataset.loop_model.linear_signal`). Frames of a sequence come from
+response (:func:`simcam.calibration.model.linear_signal`). Frames of a sequence come from
 ``Composite.sample_frames`` (fixed patterns drawn once per simulated sensor, base noise of all
 frames in one kernel pass); each call of :func:`simulate_capture` is a new sensor (sensor seed
 drawn from ``rng``).
@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .loop_model import LoopModel, SimSpec, linear_signal
-from .loop_profile import noise_entry
+from .model import LoopModel, SimSpec, linear_signal
+from .profile import noise_entry
 
 #: effects whose draw is a fixed pattern (left out when the clean reference already holds it).
 FIXED_EFFECTS = ("dsnu", "column_fpn", "prnu", "hot_pixels")

@@ -9,9 +9,9 @@ pytest.importorskip("emva1288")
 
 from emva1288.camera.camera import Camera  # noqa: E402
 
-from simcam.dataset.capture import CaptureSet, Sequence  # noqa: E402
-from simcam.dataset.loop import LoopConfig, run_loop  # noqa: E402
-from simcam.dataset.photon_transfer import emva1288_numbers  # noqa: E402
+from simcam.calibration.capture import CaptureSet, Sequence  # noqa: E402
+from simcam.calibration.loop import LoopConfig, run_loop  # noqa: E402
+from simcam.calibration.photon_transfer import emva1288_numbers  # noqa: E402
 
 SIZE, FRAMES = 64, 12
 LEVELS_DN = (300, 600, 900, 1200, 1500, 1800, 2100, 2400)

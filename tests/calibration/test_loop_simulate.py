@@ -4,7 +4,8 @@ capture against closed forms in DN."""
 import numpy as np
 import pytest
 
-from simcam.dataset.loop_model import LoopModel, SimSpec, simulate_capture
+from simcam.calibration.model import LoopModel, SimSpec
+from simcam.calibration.simulate import simulate_capture
 
 
 def _model(**effects):

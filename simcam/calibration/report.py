@@ -16,13 +16,16 @@ import numpy as np
 
 from ..errors import ProfileError
 from . import diagnostics as dg
-from .loop import KL_BINNING, KL_EDGES, LoopConfig, GroupResult, ctx_like
-from .loop_kl import FAMILIES, GATE_Z, STRUCTURED_BINNING
+from .heldout import KL_BINNING, KL_EDGES
+from .effects import ctx_like
+from .loop import LoopConfig, GroupResult
+from .heldout import FAMILIES, GATE_Z, STRUCTURED_BINNING
 
 STRUCTURED_KL = (f"sum over the families {', '.join(FAMILIES)} of the held-out noise (per sequence and CFA plane) of "
                  f"their KL minus its sampling floor, counted where it exceeds {GATE_Z:g} sampling SDs; binning: "
                  f"{STRUCTURED_BINNING}")
-from .loop_model import LoopModel, simulate_capture
+from .model import LoopModel
+from .simulate import simulate_capture
 
 REPORT_SCHEMA = "simcam-loop-report/1"
 PROFILE_SCHEMA = 1
@@ -114,7 +117,7 @@ def loop_model_dict(results: list[GroupResult], capture, camera_id: str | None =
     of simcam's noise vocabulary); ``--start-profile`` reads it back losslessly.
 
     Base model per ISO as a Poisson-Gaussian on normalised raw (beta1 = K / (white - black),
-    beta2 = read^2 / (white - black)^2, seed eq. 3.6) plus the same in DN.
+    beta2 = read^2 / (white - black)^2, Abdelhamed, PhD dissertation, York University, 2020, eq. 3.6) plus the same in DN.
     """
     first = results[0].model
     isos = []
@@ -147,16 +150,17 @@ def write_yaml(path: Path, doc: dict) -> None:
 
 def read_start_profile(path: Path) -> dict[int, LoopModel]:
     """LoopModels per ISO from ``loop_model.yaml`` or a noise-stage ``profile.yaml`` written by simcam loop."""
-    import yaml
+    from ..yamlio import load_yaml
 
     try:
-        doc = yaml.safe_load(Path(path).read_text())
+        text = Path(path).read_text()
     except FileNotFoundError:
         raise ProfileError(f"{path}: start profile not found") from None
-    except yaml.YAMLError as exc:
-        raise ProfileError(f"{path}: not valid YAML ({str(exc).splitlines()[0]})") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ProfileError(f"{path}: cannot read start profile ({exc})") from None
+    doc = load_yaml(text, source=str(path), error=ProfileError)
     if isinstance(doc, dict) and "cameras" in doc:
-        from .loop_profile import models_from_noise_profile
+        from .profile import models_from_noise_profile
 
         return models_from_noise_profile(doc, str(path))
     if not isinstance(doc, dict) or doc.get("schema_version") != PROFILE_SCHEMA or "isos" not in doc:
@@ -436,7 +440,7 @@ def run_and_write(capture_dir: str | Path, out_dir: str | Path, *, start_profile
     emva = {iso: emva1288_numbers(capture.group(iso)) for iso in capture.isos()}
     doc = build_report(results, capture, cfg, emva)
     out_dir.mkdir(parents=True, exist_ok=True)
-    from .loop_profile import noise_profile
+    from .profile import noise_profile
 
     write_yaml(out_dir / "profile.yaml", noise_profile(results, capture))
     write_yaml(out_dir / "loop_model.yaml", loop_model_dict(results, capture))

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from simcam.dataset.loop_model import LoopModel
-from simcam.dataset.loop_profile import models_from_noise_profile, noise_entry, noise_profile
+from simcam.calibration.model import LoopModel
+from simcam.calibration.profile import models_from_noise_profile, noise_entry, noise_profile
 
 
 def _model():
@@ -52,7 +52,7 @@ def test_profile_is_accepted_by_the_noise_stage():
 
 def test_noise_stage_from_the_profile_draws_the_fitted_noise():
     """The written profile, read by simcam.profiles and sampled by the noise stage, has the loop model's
-    photon-transfer curvature and read-noise crosstalk (closed forms in DN, see test_loop_backend)."""
+    photon-transfer curvature and read-noise crosstalk (closed forms in DN, see test_loop_simulate)."""
     from simcam.noise import NoiseCondition
     from simcam.profiles import profile_from_dict
 

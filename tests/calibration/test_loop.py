@@ -84,8 +84,8 @@ def test_cli_end_to_end_and_heldout_kl_drop(tmp_path):
 
 
 def test_no_dark_sequence_runs_without_dark_diagnostics(tmp_path):
-    from simcam.dataset.capture import read_capture_set
-    from simcam.dataset.loop import LoopConfig, run_loop
+    from simcam.calibration.capture import read_capture_set
+    from simcam.calibration.loop import LoopConfig, run_loop
 
     caps = capture_set(SensorSpec(height=32, width=32), n_frames=8)
     del caps["dark"]
@@ -131,7 +131,7 @@ def test_detection_matrix(case, seed):
 def test_scene_only_set_with_clean_reference(tmp_path):
     # no dark, no flat: the base gain comes from binned per-pixel variance against the clean level
     from loop_matrix import in_memory_capture
-    from simcam.dataset.loop import LoopConfig, run_loop
+    from simcam.calibration.loop import LoopConfig, run_loop
 
     spec = SensorSpec(height=32, width=32)
     caps = capture_set(spec, n_frames=8, flat_levels=(), scene=True)
@@ -151,7 +151,7 @@ def test_effect_outside_the_vocabulary_is_reported_unexplained():
     # temporal column noise (per frame, per column) is not one of the 13 effects: the loop must
     # not force it into column_fpn (whose statistic only sees the fixed part) but report it
     from loop_matrix import in_memory_capture
-    from simcam.dataset.loop import LoopConfig, run_loop
+    from simcam.calibration.loop import LoopConfig, run_loop
 
     # (it also inflates the spread of the fixed-column statistic col_fpn_excess beyond the simulated one, so
     # that one may be reported too, never attributed; and the column spectrum may stay significant)
@@ -171,7 +171,7 @@ def test_checkerboard_frame_offset_outside_the_vocabulary_is_reported_unexplaine
     # darks): no effect of the vocabulary makes it, so it must be reported, not forced into one.
     # 0.3 DN per frame against a white-noise expectation of 3 DN / 64 = 0.047 DN: ~40x in variance
     from loop_matrix import in_memory_capture
-    from simcam.dataset.loop import LoopConfig, run_loop
+    from simcam.calibration.loop import LoopConfig, run_loop
 
     spec = SensorSpec(effects={"checker_offset": {"sigma_dn": 0.3}})
     r = run_loop(in_memory_capture(capture_set(spec)), LoopConfig())[0]

@@ -5,8 +5,8 @@ import re
 import pytest
 
 from conftest import shared_path
-from simcam.dataset.capture import read_emva1288
-from simcam.dataset.photon_transfer import emva1288_numbers
+from simcam.calibration.capture import read_emva1288
+from simcam.calibration.photon_transfer import emva1288_numbers
 
 
 def _reference(path):
@@ -42,8 +42,8 @@ def test_emva_dsnu_prnu(emva):
 
 @pytest.mark.slow
 def test_loop_on_emva_set_reports_before_after(tmp_path):
-    from simcam.dataset.loop_report import run_and_write
-    from simcam.dataset.loop import LoopConfig
+    from simcam.calibration.report import run_and_write
+    from simcam.calibration.loop import LoopConfig
 
     desc = shared_path("emva1288_ccd/EMVA1288_Data.txt")
     doc = run_and_write(desc.parent, tmp_path / "out", cfg=LoopConfig(max_size=64))

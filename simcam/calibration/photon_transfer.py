@@ -30,7 +30,7 @@ def plane_ptc(darks: list[np.ndarray], flats: list[np.ndarray], full_scale_dn: f
     var = K_c * (mu - mu_dark_c) + var_dark_c with K_c the zero-intercept slope of the
     dark-corrected points (or, without darks, a line with intercept); returned also as the
     NLF on normalised raw, beta1_c = K_c / full_scale, beta2_c = var_dark_c / full_scale^2
-    (seed eq. 3.8). None without a lit sequence.
+    (Abdelhamed, PhD dissertation, York University, 2020, eq. 3.8). None without a lit sequence.
     """
     if not flats:
         return None

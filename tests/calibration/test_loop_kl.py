@@ -1,4 +1,4 @@
-"""Held-out KL of the loop (simcam.dataset.loop_kl): the Jeffreys-smoothed estimator, its sampling
+"""Held-out KL of the loop (simcam.calibration.heldout): the Jeffreys-smoothed estimator, its sampling
 floor against two-sample simulations, and the structured (aggregated-noise) marginals on noise made
 here with numpy (independent of simcam's noise code)."""
 
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from simcam.dataset.loop import KL_EDGES, kl_sampling_floor, marginal_kl
-from simcam.dataset.loop_kl import kl_counts, kl_floor, structured_kl
+from simcam.calibration.heldout import KL_EDGES, kl_sampling_floor, marginal_kl
+from simcam.calibration.heldout import kl_counts, kl_floor, structured_kl
 
 # sizes of the loop's held-out pixel KL on the test captures: 5 sequences x 6 held-out frames x 64 x 64
 # values, 8 simulated replicates of them

@@ -5,7 +5,7 @@ import pytest
 import yaml
 
 from loop_generator import SensorSpec, capture_set, write_capture_set
-from simcam.dataset.capture import read_capture_set, read_emva1288
+from simcam.calibration.capture import read_capture_set, read_emva1288
 from simcam.errors import DatasetError
 
 

@@ -1,13 +1,13 @@
 """The loop's fitted models as a calibration profile of simcam's noise stage (``simcam.profiles``, schema 1).
 
 Each ISO becomes a ``composite`` entry: a ``poisson_gaussian`` base on normalised raw
-(beta1 = K / (white - black), beta2 = read^2 / (white - black)^2, seed eq. 3.6) and the effects
+(beta1 = K / (white - black), beta2 = read^2 / (white - black)^2, Abdelhamed, PhD dissertation, York University, 2020, eq. 3.6) and the effects
 in the noise stage's parameterisation (normalised raw offsets, dimensionless gains), in signal-chain
 order: signal effects (prnu, frame_flicker), then readout effects: heavy-tailed read noise,
 crosstalk (on shot + read noise), row and periodic noise, the response (nonlinearity, on the noisy
 value), fixed offsets, quantisation last.
 
-The same entry is what the loop's bootstrap samples (:mod:`simcam.dataset.loop_backend`), so the
+The same entry is what the loop's bootstrap samples (:mod:`simcam.calibration.simulate`), so the
 noise stage given ``profile.yaml`` draws the noise the loop fitted. Conversions:
 
 * ``heavy_tail_read``: the read noise *is* Tukey-lambda with the read variance: beta2 = 0 and
@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .loop_model import LoopModel, tukey_var
+from .model import LoopModel, tukey_var
 
 SIGNAL_ORDER = ("prnu", "channel_gain", "frame_flicker")
 READOUT_ORDER = ("heavy_tail_read", "spatial_correlation", "row_noise", "periodic_pattern", "nonlinearity",

@@ -1,7 +1,7 @@
 """Base fit and per-effect parameter fits of the calibration loop.
 
 Moment estimators read the same intermediates as the diagnostics
-(:mod:`simcam.dataset.diagnostics`); shapes that have no closed-form
+(:mod:`simcam.calibration.diagnostics`); shapes that have no closed-form
 estimator (Tukey-lambda tails under quantisation, plane crosstalk diluted by
 quantisation noise, flicker) are fitted by indirect inference: the parameter
 whose simulated statistic matches the measured one (linear interpolation on a
@@ -13,7 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from . import diagnostics as dg
-from .loop_model import LoopModel, SimSpec, simulate_capture, site_map
+from .model import LoopModel, SimSpec, site_map
+from .simulate import simulate_capture
 
 PLANE_OFFSETS = dg.PLANE_OFFSETS
 
@@ -129,7 +130,7 @@ def fit_dsnu(d, model, ctx):
 
 def fit_hot_pixels(d, model, ctx):
     """Hot pixels: pixels whose dark temporal median (row/column profiles removed) is above 6
-    robust sigma (:func:`~simcam.dataset.diagnostics.hot_pixel_mask`); ``fraction`` of pixels,
+    robust sigma (:func:`~simcam.calibration.diagnostics.hot_pixel_mask`); ``fraction`` of pixels,
     and a log-normal of their offsets in the dark temporal-mean map (DN) by the moments of the
     log offsets (``log_mean``, ``log_sigma``; written to the noise stage as ``hot_offset`` = the
     mean exp(log_mean + log_sigma^2 / 2) and ``hot_log_sigma``).

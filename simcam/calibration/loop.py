@@ -4,8 +4,8 @@ Per ISO group of a capture set:
 
 1. Frames of each sequence are split in time: the first half fits, the second
    half is held out (sequences of < 4 frames only fit).
-2. Base fit (:func:`simcam.dataset.effect_fit.base_fit`).
-3. Every diagnostic of :mod:`simcam.dataset.diagnostics` is computed on the
+2. Base fit (:func:`simcam.calibration.effects.base_fit`).
+3. Every diagnostic of :mod:`simcam.calibration.diagnostics` is computed on the
    fit frames and on ``replicates`` captures simulated from the current model
    (parametric bootstrap, same shapes and frame counts); standardised
    discrepancies get Student-t p-values; significance by Holm's step-down
@@ -16,7 +16,7 @@ Per ISO group of a capture set:
    candidate model is simulated again. On held-out frames: the pixel marginal
    KL (Noise Flow binning, Jeffreys-smoothed model histogram) with its
    sampling floor and excess, the structured marginal KL of aggregated noise
-   (:mod:`simcam.dataset.loop_kl`), NLL/dim of the model's Gaussian marginal
+   (:mod:`simcam.calibration.heldout`), NLL/dim of the model's Gaussian marginal
    where it has one, and the diagnostic's own standardised discrepancy,
    before and after. The structured KL is reported, not used in decisions.
 5. The effect is kept if the held-out discrepancy of its diagnostic shrinks and
@@ -39,15 +39,10 @@ import numpy as np
 from ..errors import DatasetError
 from . import diagnostics as dg
 from .capture import CaptureSet, Sequence
-from .effect_fit import base_fit, ctx_like, fit_effect
-from .loop_kl import STRUCTURED_BINNING, kl_counts, kl_floor, structured_kl  # noqa: F401
-from .loop_model import LoopModel, SimSpec, marginal_variance, simulate_capture, site_map
-
-#: Noise Flow marginal-KL binning (DESIGN.md sec. 5), normalised raw units.
-KL_EDGES = np.concatenate([[-1000.0], np.linspace(-0.1, 0.1, 65), [1000.0]])
-KL_BINNING = ("edges [-1000] + linspace(-0.1, 0.1, 65) + [1000] on normalised raw noise; forward KL D(real||model) "
-              "over the bins the data occupies, model counts + 1/2 per bin (Jeffreys)")
-
+from .effects import base_fit, ctx_like, fit_effect
+from .heldout import KL_BINNING, KL_EDGES, STRUCTURED_BINNING, kl_sampling_floor, marginal_kl, structured_kl  # noqa: F401
+from .model import LoopModel, SimSpec, marginal_variance, site_map
+from .simulate import simulate_capture
 
 @dataclass
 class LoopConfig:
@@ -159,22 +154,6 @@ def noise_frames(part, frames_list, specs, model: LoopModel) -> list[np.ndarray]
 def noise_values(part, frames_list, specs, model: LoopModel) -> np.ndarray:
     """:func:`noise_frames` of all sequences, flattened into one array."""
     return np.concatenate([x.ravel() for x in noise_frames(part, frames_list, specs, model)])
-
-
-def marginal_kl(real: np.ndarray, model: np.ndarray) -> float:
-    """Forward KL D(real || model) with the Noise Flow binning (:data:`KL_EDGES`), the model's histogram
-    smoothed by half a count per bin (:func:`simcam.dataset.loop_kl.kl_counts`), so data in bins the
-    simulation leaves empty (a hot-pixel tail) count."""
-    return kl_counts(np.histogram(real, KL_EDGES)[0], np.histogram(model, KL_EDGES)[0])
-
-
-def kl_sampling_floor(real: np.ndarray, model: np.ndarray) -> float:
-    """Expected :func:`marginal_kl` between two samples of the same law with these sizes (exact binomial
-    expectation of the estimator, :func:`simcam.dataset.loop_kl.kl_floor`, on the pooled histogram;
-    Miller-Madow (B - 1) / 2N + (B - 1) / 2M to second order): differences below it are noise."""
-    n = np.histogram(real, KL_EDGES)[0]
-    m = np.histogram(model, KL_EDGES)[0]
-    return kl_floor(n + m, real.size, model.size)
 
 
 def nll_per_dim(part, specs, model: LoopModel) -> float | None:

@@ -1,8 +1,9 @@
 """The sensor model the calibration loop fits (parameters in DN) and its closed-form marginal.
 
 The model is simcam's noise-stage composite (:mod:`simcam.noise`) written in
-the units the loop measures (DN, electrons): a Poisson-Gaussian base (seed
-eq. 3.6; EMVA 1288 sec. 2) plus effects of the noise vocabulary. In signal-
+the units the loop measures (DN, electrons): a Poisson-Gaussian base (A. Abdelhamed,
+"Noise Modelling for Smartphone Cameras", PhD dissertation, York University, 2020, eq. 3.6;
+EMVA Standard 1288 Release 4.0, sec. 2) plus effects of the noise vocabulary. In signal-
 chain order::
 
     e     ~ Poisson(mu_e * prnu_map * (1 + flicker_f))
@@ -11,10 +12,10 @@ chain order::
     v     = black + offset_c + dsnu_map + col_map + hot_map + y
     frame = clip(round(v / q) * q, 0, white)                   (ADC, step q DN)
 
-There is no second simulator: :func:`simulate_capture` converts the model to
-the noise stage's composite entry (:func:`simcam.dataset.loop_profile.noise_entry`,
-the entry written to ``profile.yaml``) and samples it
-(:mod:`simcam.dataset.loop_backend`), so the profile reproduces the bootstrap.
+There is no second simulator: :func:`simcam.calibration.simulate.simulate_capture`
+converts the model to the noise stage's composite entry
+(:func:`simcam.calibration.profile.noise_entry`, the entry written to ``profile.yaml``)
+and samples it, so the profile reproduces the bootstrap.
 """
 
 from __future__ import annotations
@@ -133,14 +134,6 @@ def linear_signal(model: LoopModel, signal_dn: np.ndarray) -> np.ndarray:
 
     s = model.full_scale_dn
     return Nonlinearity(strength=float(np.clip(-c, -0.45, 0.45))).inverse(y / s) * s
-
-
-def simulate_capture(model: LoopModel, specs: list[SimSpec], rng) -> list[np.ndarray]:
-    """One simulated sensor (new fixed patterns), all sequences of ``specs``: (n, H, W) float32 DN each,
-    drawn by simcam's noise stage (:func:`simcam.dataset.loop_backend.simulate_capture`)."""
-    from .loop_backend import simulate_capture as _sim
-
-    return _sim(model, specs, rng)
 
 
 def marginal_variance(model: LoopModel, signal_dn: np.ndarray, *, fixed_in_clean: bool = False) -> np.ndarray | None:

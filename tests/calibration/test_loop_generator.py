@@ -52,8 +52,8 @@ def test_hot_pixel_log_normal_fit_on_exponential_offsets():
     import numpy as np
     import pytest
 
-    from simcam.dataset import diagnostics as dg
-    from simcam.dataset.effect_fit import fit_hot_pixels
+    from simcam.calibration import diagnostics as dg
+    from simcam.calibration.effects import fit_hot_pixels
     from loop_generator import HiddenEffectSensor, SensorSpec
 
     spec = SensorSpec(height=128, width=128, effects={"hot_pixels": {"fraction": 0.02, "mean_dn": 60.0}})

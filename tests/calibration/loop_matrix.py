@@ -25,7 +25,7 @@ CASES = ((),) + tuple((e,) for e in EFFECTS) + PAIRS
 
 
 def in_memory_capture(caps: dict):
-    from simcam.dataset.capture import CaptureSet, Sequence
+    from simcam.calibration.capture import CaptureSet, Sequence
 
     seqs = [Sequence(name, kind, fr, meta["iso"], meta["exposure_s"], meta["cfa"],
                      np.full((2, 2), float(meta["black_level"])), meta["white_level"])
@@ -52,7 +52,7 @@ def scaled(effect: str, scale: float) -> dict:
 
 
 def run_case(effects: tuple, seed: int = 7, scale: float = 1.0, **spec_kw):
-    from simcam.dataset.loop import LoopConfig, run_loop
+    from simcam.calibration.loop import LoopConfig, run_loop
 
     spec = SensorSpec(effects={e: scaled(e, scale) for e in effects}, **spec_kw)
     return run_loop(in_memory_capture(capture_set(spec, seed=seed)), LoopConfig())[0]
