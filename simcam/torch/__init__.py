@@ -17,9 +17,9 @@ See ``docs/torch.md`` for layouts, randomness and the support table.
 
 from .api import AddNoise, add_noise, flow_noise
 from .dispatch import NOT_SUPPORTED, SAMPLERS
-from .effects import EFFECTS
+from .effects import EFFECTS, EFFECTS_NOT_SUPPORTED
 from .layout import to_mosaic, to_packed
 from .logprob import log_prob
 
-__all__ = ["AddNoise", "EFFECTS", "NOT_SUPPORTED", "SAMPLERS", "add_noise", "flow_noise", "log_prob", "to_mosaic",
+__all__ = ["AddNoise", "EFFECTS", "EFFECTS_NOT_SUPPORTED", "NOT_SUPPORTED", "SAMPLERS", "add_noise", "flow_noise", "log_prob", "to_mosaic",
            "to_packed"]

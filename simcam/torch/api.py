@@ -60,10 +60,19 @@ def _offsets(offsets: Any, frame_shape: Any, clean: torch.Tensor, layout: str):
     return o
 
 
+def _exposure_s(value: Any, batch: int):
+    if value is None:
+        return None
+    t = np.asarray([float(v) for v in per_sample(value, batch, name="exposure_s")], np.float64)
+    if not (np.isfinite(t).all() and (t >= 0).all()):
+        raise NoiseModelError(f"exposure_s: expected exposure times >= 0 in seconds, got {t.tolist()}")
+    return t
+
+
 def add_noise(clean: torch.Tensor, profile_or_model: Any, *, iso: Any = None, exposure: Any = None,
               camera: Any = None, generator: torch.Generator | None = None, extrapolate: bool = False,
               validate: bool = True, temperature: float | None = None, frame_shape: Any = None,
-              offsets: Any = None, _cache: dict | None = None) -> torch.Tensor:
+              offsets: Any = None, exposure_s: Any = None, _cache: dict | None = None) -> torch.Tensor:
     """Noisy raw batch for a clean one, drawn on the batch's device.
 
     Parameters
@@ -103,6 +112,9 @@ def add_noise(clean: torch.Tensor, profile_or_model: Any, *, iso: Any = None, ex
         place in the frame; without it a patch is a frame of its own size.
     offsets : sequence of B (row, column), optional
         Mosaic position of each patch's pixel (0, 0) in the full frame (even values: the CFA phase).
+    exposure_s : float or sequence of B, optional
+        Exposure time of each sample in seconds, for the exposure-dependent effects (``dark_current``,
+        ``amp_glow``, ``empirical_field``; the numpy models' ``NoiseCondition.exposure_s``).
 
     Returns
     -------
@@ -127,7 +139,7 @@ def add_noise(clean: torch.Tensor, profile_or_model: Any, *, iso: Any = None, ex
     models = resolve_models(profile_or_model, b, iso=iso, camera=camera, extrapolate=extrapolate, cache=_cache)
     ctx = Ctx(device=clean.device, dtype=work.dtype, layout=layout, shape=tuple(work.shape[-2:]),
               generator=generator, validate=validate, frame_shape=None if frame_shape is None else tuple(frame_shape),
-              offsets=_offsets(offsets, frame_shape, clean, layout))
+              offsets=_offsets(offsets, frame_shape, clean, layout), exposure_s=_exposure_s(exposure_s, b))
     groups = group_models(models)
     if len(groups) == 1:
         out = sample_group(groups[0], work, ctx)
@@ -177,7 +189,8 @@ class AddNoise(nn.Module):
         self._memo: dict = {}
 
     def forward(self, clean: torch.Tensor, *, iso: Any = None, exposure: Any = None,
-                generator: torch.Generator | None = None, frame_shape: Any = None, offsets: Any = None) -> torch.Tensor:
+                generator: torch.Generator | None = None, frame_shape: Any = None, offsets: Any = None,
+                exposure_s: Any = None) -> torch.Tensor:
         return add_noise(clean, self.source, iso=iso, exposure=exposure, camera=self.camera, generator=generator,
                          extrapolate=self.extrapolate, validate=self.validate, temperature=self.temperature,
-                         frame_shape=frame_shape, offsets=offsets, _cache=self._memo)
+                         frame_shape=frame_shape, offsets=offsets, exposure_s=exposure_s, _cache=self._memo)

@@ -16,7 +16,7 @@ import torch
 
 from ..errors import NoiseModelError
 from .context import Ctx, sites
-from .effects import EFFECTS, EffectState, fixed_arrays
+from .effects import EFFECTS, TABLES, EffectState, fixed_arrays
 from .group import Group, entry_key
 
 _FIXED_CACHE: "OrderedDict[tuple, list[dict[str, torch.Tensor]]]" = OrderedDict()
@@ -35,7 +35,8 @@ def fixed_tensors(model, shape: tuple[int, int], device, dtype) -> list[dict[str
     for e, d in zip(model.effects, draws):
         arrays = fixed_arrays(e, d, shape)
         out.append({k: torch.as_tensor(a[:, None] if a.ndim == 3 else a,
-                                       dtype=torch.bool if a.dtype == bool else dtype).to(device)
+                                       dtype=torch.float64 if k in TABLES else
+                                       torch.bool if a.dtype == bool else dtype).to(device)
                     for k, a in arrays.items()})
     _FIXED_CACHE[key] = out
     while len(_FIXED_CACHE) > _FIXED_CACHE_SIZE:
@@ -78,7 +79,11 @@ def composite(group: Group, clean: torch.Tensor, ctx: Ctx) -> torch.Tensor:
     fixed = [fixed_tensors(m, fshape, ctx.device, ctx.dtype) for m in group.uniq]
     effects = group.models[0].effects
     egroups = [group.sub(lambda m, i=i: m.effects[i]) for i in range(len(effects))]
-    states = [EffectState(_stacked(group, fixed, i, offsets, shape), offsets=offsets) for i in range(len(effects))]
+    exp = None if ctx.exposure_s is None else torch.as_tensor(
+        ctx.exposure_s[np.asarray(group.index)], dtype=torch.float64).to(ctx.device).reshape(-1, 1, 1, 1)
+    states = [EffectState(_stacked(group, fixed, i, offsets, shape), offsets=offsets,
+                          per_uniq=lambda name, i=i: [u[i][name] for u in fixed], exposure_s=exp)
+              for i in range(len(effects))]
     signal = clean
     for i, e in enumerate(effects):
         if e.stage == "signal":

@@ -29,6 +29,8 @@ class Ctx:
     #: full-frame (H, W) of the fixed patterns and each sample's (row, column) crop offset, or None
     frame_shape: tuple[int, int] | None = None
     offsets: np.ndarray | None = None  # [B, 2] int64, mosaic pixels, even
+    #: each sample's exposure time in seconds (dark_current, amp_glow, empirical_field), or None
+    exposure_s: np.ndarray | None = None
 
     def offsets_of(self, group) -> np.ndarray | None:
         """The crop offsets ``[G, 2]`` of a group's samples (None without ``frame_shape``)."""

@@ -234,3 +234,28 @@ def test_a_list_of_models_mixes_types_in_one_batch():
     y = add_noise(c, models, generator=torch.Generator().manual_seed(0))
     sd = (y - c).flatten(1).std(dim=1).numpy()
     np.testing.assert_allclose(sd, [0.01, 0.05, 0.02], rtol=5 * np.sqrt(1 / (2 * 4 * 64 * 64)))
+
+
+def test_measured_maps_of_a_profile_are_applied_and_cropped(tmp_path):
+    """Empirical effects carrying measured maps (FILE.npz#KEY): the torch composite adds the map itself, and with
+    frame_shape/offsets each patch gets its crop of it."""
+    rng = np.random.default_rng(0)
+    offset = rng.normal(0, 0.01, (40, 64)).astype(np.float32)
+    gain = (1 + rng.normal(0, 0.05, 64)).astype(np.float32)
+    np.savez(tmp_path / "maps.npz", dsnu=offset, col_gain=gain)
+    m = model_from_entry({"type": "composite", "base": {"type": "gaussian", "sigma": 0.0}, "effects": [
+        {"type": "empirical_gain", "axis": "column", "map": f"{tmp_path}/maps.npz#col_gain"},
+        {"type": "empirical_offset", "axis": "pixel", "map": f"{tmp_path}/maps.npz#dsnu"}]})
+    full = _clean(40, 64, 0.1, 0.7)
+    offs = [(0, 0), (8, 20), (24, 48)]
+    c = torch.as_tensor(np.stack([full[y:y + 16, x:x + 16] for y, x in offs]))[:, None]
+    y = add_noise(c, m, frame_shape=(40, 64), offsets=offs, generator=torch.Generator().manual_seed(0))
+    want = np.stack([(full * gain[None, :] + offset)[oy:oy + 16, ox:ox + 16] for oy, ox in offs])
+    np.testing.assert_allclose(y[:, 0].numpy(), want, rtol=0, atol=2e-7)
+
+
+def test_exposure_dependent_effects_need_exposure_s():
+    m = model_from_entry({"type": "composite", "base": PG4, "effects": [
+        {"type": "dark_current", "rate": 10.0, "electron": 1e-3}]})
+    with pytest.raises(NoiseModelError, match="exposure_s"):
+        add_noise(torch.full((1, 4, 4, 4), 0.1), m)

@@ -35,7 +35,24 @@ EFFECT_CASES = {
     "frame_flicker": [{"type": "frame_flicker", "sigma": 0.05}],
     "nonlinearity": [{"type": "nonlinearity", "strength": 0.3}],
     "channel_gain": [{"type": "channel_gain", "gain": [1.2, 1.0, 0.9, 0.7]}],
+    "dead_pixels": [{"type": "dead_pixels", "dead_fraction": 0.02, "stuck_fraction": 0.02, "stuck_value": 0.8}],
+    "rtn": [{"type": "rtn", "fraction": 0.1, "amplitude": 0.02, "amplitude_log_sigma": 0.3, "p_high": 0.3}],
+    "charge_crosstalk": [{"type": "charge_crosstalk", "coefficient": 0.08, "diagonal": 0.02}],
+    "adc_dnl": [{"type": "adc_dnl", "range_dn": 200.0, "offset_dn": 16.0, "bits": 8, "dnl_sigma": 0.3}],
+    "empirical_code": [{"type": "empirical_code", "range_dn": 100.0, "offset_dn": 8.0, "first_code": 2,
+                        "edges": [float(v) for v in [0.5 + k + 0.3 * ((k * 7919) % 11 - 5) / 5 for k in range(120)]]}],
+    "dark_current": [{"type": "dark_current", "rate": 20.0, "dcnu_log_sigma": 0.4, "electron": 2.5e-3,
+                      "temperature_c": 35.0, "doubling_c": 7.0}],
+    "amp_glow": [{"type": "amp_glow", "rate": 60.0, "origin": "top_right", "scale": 0.3, "electron": 2.5e-3}],
+    "empirical_field": [{"type": "empirical_field", "field": [[0.05, 0.1, 0.2], [0.02, 0.04, 0.3]], "electron": 2.5e-3}],
+    "empirical_offset": [{"type": "empirical_offset", "axis": "row", "quantiles": [-0.01, -0.002, 0.0, 0.003, 0.02]},
+                         {"type": "empirical_offset", "axis": "frame", "temporal": True,
+                          "quantiles": [-0.004, 0.0, 0.001, 0.006], "scale": 1.5}],
+    "empirical_gain": [{"type": "empirical_gain", "axis": "pixel", "quantiles": [0.9, 0.97, 1.0, 1.02, 1.1]}],
 }
+
+#: exposure time (seconds) given to both samplers (exposure-dependent effects).
+EXPOSURE_S = 2.0
 
 
 def effect_entry(name: str) -> dict:
