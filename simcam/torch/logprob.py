@@ -180,12 +180,17 @@ def _composite(group, y, clean, ctx):
         raise NoiseModelError(f"model 'composite': log_prob is not tractable with effect(s) {bad} "
                               f"(random per frame or discretising)")
     shape = tuple(clean.shape[-2:])
-    fixed = [fixed_tensors(m, shape, ctx.device, torch.float64) for m in group.uniq]
+    # the numpy composite computes the signal and the offsets in float32: so do we (then float64)
+    from dataclasses import replace
+
+    c32 = replace(ctx, dtype=torch.float32)
+    fixed = [fixed_tensors(m, shape, ctx.device, torch.float32) for m in group.uniq]
     eg = [group.sub(lambda m, i=i: m.effects[i]) for i in range(len(effects))]
-    signal = clean
+    signal = clean.float()
     for i, e in enumerate(effects):
         if e.stage == "signal":
-            signal = EFFECTS[e.type](eg[i], signal, ctx, EffectState(_stacked(group, fixed, i)))
+            signal = EFFECTS[e.type](eg[i], signal, c32, EffectState(_stacked(group, fixed, i)))
+    signal = signal.double()
     y = y.float().double()  # the numpy model rounds the observation to float32 first
     log_jac = torch.zeros_like(y)
     for i in reversed(range(len(effects))):
@@ -198,8 +203,8 @@ def _composite(group, y, clean, ctx):
             y = 2.0 * y / (1.0 + torch.sqrt(disc))
             log_jac = log_jac + torch.log(torch.abs(1.0 - 2.0 * s * y))
         else:
-            zero = torch.zeros_like(y)
-            y = y - EFFECTS[e.type](eg[i], zero, ctx, EffectState(_stacked(group, fixed, i)))
+            zero = torch.zeros(y.shape, dtype=torch.float32, device=y.device)
+            y = y - EFFECTS[e.type](eg[i], zero, c32, EffectState(_stacked(group, fixed, i))).double()
     return _base_logpdf(group.sub(lambda m: m.base), y, signal, ctx) - log_jac
 
 

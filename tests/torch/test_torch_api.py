@@ -22,6 +22,7 @@ LOGPROB_CASES = {
     "mixture_p1_0": {**MODEL_CASES["poisson_mixture"], "p1": 0.0},
     "composite": {"type": "composite", "base": PG4, "sensor_seed": 3, "effects": [
         {"type": "prnu", "sigma": 0.03}, {"type": "channel_gain", "gain": [1.1, 1.0, 0.95, 0.8]},
+        {"type": "empirical_gain", "axis": "row", "quantiles": [0.95, 1.0, 1.05]},
         {"type": "nonlinearity", "strength": 0.2}, {"type": "dsnu", "sigma": 0.002},
         {"type": "column_fpn", "sigma": 0.002}, {"type": "black_level_offset", "offset": [0.01, 0.0, 0.005, 0.02]},
         {"type": "periodic_pattern", "amplitude": 0.003, "period_px": 6.0, "random_phase": False, "phase": 0.4}]},
