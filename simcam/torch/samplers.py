@@ -69,7 +69,7 @@ def nlf(group: Group, clean: torch.Tensor, ctx: Ctx) -> torch.Tensor:
     z = ctx.randn(clean.shape)
     if clean.requires_grad or b1.requires_grad:
         return clean + torch.sqrt((clean * b1 + b2).clamp_min(0)) * z
-    sd = torch.addcmul(b2, clean, b1).clamp_min_(0).sqrt_()  # fewer passes and no temporaries
+    sd = torch.addcmul(b2, clean, b1).sqrt_()  # >= 0 for clean >= 0 (validated); NaN otherwise, as numpy
     return torch.addcmul(clean, z, sd, out=z)
 
 
