@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections import OrderedDict
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -36,13 +37,30 @@ def _structure(entry: Any) -> Any:
     return repr(entry)
 
 
+_KEYS: "OrderedDict[int, tuple[Any, str, str]]" = OrderedDict()
+
+
+def _keys(model: Any) -> tuple[str, str]:
+    """(entry key, structure key) of a model, memoised by object (profiles hand out the same objects)."""
+    hit = _KEYS.get(id(model))
+    if hit is not None and hit[0] is model:
+        return hit[1], hit[2]
+    entry = model.to_entry()
+    keys = (json.dumps(entry, sort_keys=True), json.dumps(_structure(entry), sort_keys=True))
+    _KEYS[id(model)] = (model, *keys)  # holds the model, so its id stays its own
+    while len(_KEYS) > 512:
+        _KEYS.popitem(last=False)
+    return keys
+
+
 def structure_key(model: NoiseModel) -> str:
     """Models with equal keys can be noised together with stacked parameters."""
-    return json.dumps(_structure(model.to_entry()), sort_keys=True)
+    return _keys(model)[1]
 
 
 def entry_key(model: NoiseModel) -> str:
-    return json.dumps(model.to_entry(), sort_keys=True)
+    """The model's entry as a canonical string (distinct models by parameters)."""
+    return _keys(model)[0]
 
 
 class Group:
