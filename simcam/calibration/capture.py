@@ -24,6 +24,8 @@ from ..errors import DatasetError
 
 #: A flat is refused when more than this fraction of its pixels sit at the white level.
 SATURATION_LIMIT = 0.01
+#: Largest EMVA 1288 descriptor read (bytes); real ones are a few kB.
+MAX_DESCRIPTOR_BYTES = 1 << 20
 
 
 @dataclass
@@ -259,7 +261,7 @@ def _is_sidd(d: Path) -> bool:
 
 
 def _read_sequence_dir(d: Path, region=None, bar=None) -> Sequence:
-    import yaml
+    from ..yamlio import load_yaml
 
     if _is_sidd(d):
         return _read_sidd_dir(d)
@@ -268,7 +270,13 @@ def _read_sequence_dir(d: Path, region=None, bar=None) -> Sequence:
         raise DatasetError(f"{d}: no frames; expected *.dng or *.npy files")
     side = {}
     if (d / "sequence.yaml").exists():
-        side = yaml.safe_load((d / "sequence.yaml").read_text()) or {}
+        side_path = d / "sequence.yaml"
+        try:
+            side = load_yaml(side_path.read_text(), source=str(side_path), error=DatasetError) or {}
+        except (OSError, UnicodeDecodeError) as exc:
+            raise DatasetError(f"{side_path}: cannot read ({exc})") from None
+        if not isinstance(side, dict):
+            raise DatasetError(f"{side_path}: expected a mapping of iso, exposure_s, cfa, black_level, white_level")
     first_shape, metas, builder = None, [], None
     for f in files:
         arr, meta = _read_frame(f, side)
@@ -422,7 +430,17 @@ def read_emva1288(descriptor: str | Path, *, region=None, progress: bool | None 
     descriptor = Path(descriptor)
     bits = width = height = None
     blocks: list[dict] = []
-    for lineno, raw in enumerate(descriptor.read_text().splitlines(), 1):
+    try:
+        if descriptor.stat().st_size > MAX_DESCRIPTOR_BYTES:
+            raise DatasetError(f"{descriptor}: {descriptor.stat().st_size} bytes; expected an EMVA 1288 descriptor "
+                               f"(a text file under {MAX_DESCRIPTOR_BYTES} bytes) or a directory of sequences")
+        text = descriptor.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise DatasetError(f"{descriptor}: not a text file; expected an EMVA 1288 descriptor (EMVA1288_Data.txt) "
+                           "or a directory of sequences (dark*/, flat*/, scenes)") from None
+    except OSError as exc:
+        raise DatasetError(f"{descriptor}: cannot read ({exc.strerror})") from None
+    for lineno, raw in enumerate(text.splitlines(), 1):
         line = raw.strip()
         if not line or line.startswith("#"):
             continue

@@ -199,14 +199,15 @@ def write_yaml(path: Path, doc: dict) -> None:
 
 def read_start_profile(path: Path) -> dict[int, LoopModel]:
     """LoopModels per ISO from ``loop_model.yaml`` or a noise-stage ``profile.yaml`` written by simcam loop."""
-    import yaml
+    from ..yamlio import load_yaml
 
     try:
-        doc = yaml.safe_load(Path(path).read_text())
+        text = Path(path).read_text()
     except FileNotFoundError:
         raise ProfileError(f"{path}: start profile not found") from None
-    except yaml.YAMLError as exc:
-        raise ProfileError(f"{path}: not valid YAML ({str(exc).splitlines()[0]})") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ProfileError(f"{path}: cannot read start profile ({exc})") from None
+    doc = load_yaml(text, source=str(path), error=ProfileError)
     if isinstance(doc, dict) and "cameras" in doc:
         from .profile import models_from_noise_profile
 

@@ -13,48 +13,100 @@ def parse_set_options(items: list[str] | None) -> dict:
 
     Values are parsed as YAML (so lists, numbers, booleans and strings work).
     """
-    import yaml
-
     from ..errors import PipelineError
+    from ..yamlio import load_yaml
 
     out = {}
     for item in items or []:
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
             raise PipelineError(f"--set {item!r}: expected STAGE.PARAM=VALUE")
-        try:
-            out[key.strip()] = yaml.safe_load(value)
-        except yaml.YAMLError:
-            raise PipelineError(f"--set {item!r}: VALUE is not valid YAML") from None
+        out[key.strip()] = load_yaml(value, source=f"--set {item!r}: VALUE", error=PipelineError)
     return out
 
 
 def render(
-    input: Path = typer.Argument(..., help="Input DNG file."),
-    output: Path = typer.Option(..., "-o", "--output", help="Output image (.png, .tif/.tiff, .exr)."),
+    inputs: list[Path] = typer.Argument(..., metavar="INPUT...",
+                                        help="DNG files, folders of DNGs or glob patterns ('raw/*.dng')."),
+    output: Path = typer.Option(..., "-o", "--output",
+                                help="Output image (.png, .tif/.tiff, .exr, .jpg) for one input; the output folder "
+                                     "when there are several inputs, a folder or a pattern."),
     pipeline: str = typer.Option("srgb", "--pipeline", "-p", help="Pipeline YAML file or built-in name."),
     set_: Optional[list[str]] = typer.Option(None, "--set", help="Override STAGE.PARAM=VALUE (YAML value); repeatable."),
     depth: Optional[str] = typer.Option(None, "--depth", help="8, 16, 32 (float) or half; default by format."),
-    seed: int = typer.Option(0, "--seed", help="Seed for random stages (noise)."),
+    seed: int = typer.Option(0, "--seed", help="Seed for random stages (noise); item i uses SeedSequence([seed, 0, i])."),
+    fmt: str = typer.Option("png", "--format", help="Batch: output format (png, tif, exr, jpg)."),
+    workers: Optional[int] = typer.Option(None, "--workers", min=0,
+                                          help="Batch: dask worker processes (default: one per core; 0: serial)."),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler",
+                                            help="Batch: dask scheduler address (default $DASK_SCHEDULER_ADDRESS, "
+                                                 "else a local cluster)."),
+    resume: bool = typer.Option(False, "--resume", help="Batch: skip inputs whose output exists."),
 ) -> None:
-    """Render a raw DNG through a pipeline to PNG / TIFF / EXR."""
-    from ..io.images import resolve_depth, write_image
+    """Render raw DNGs through a pipeline to PNG / TIFF / EXR / JPEG (one file, or a batch on dask)."""
+    from ..io.inputs import is_pattern
+    from ..io.outputs import check_output_file
+    from ..jobs import render_file
     from ..pipeline import Pipeline
 
     overrides = parse_set_options(set_)
-    resolve_depth(output, depth)  # fail on a bad format before any work
-    pipe = Pipeline.from_yaml(pipeline)
-    from ..io.dng import read_dng
+    batch = (len(inputs) > 1 or any(is_pattern(i) or Path(i).is_dir() for i in inputs)
+             or output.is_dir() or not output.suffix)
+    if not batch:
+        from ..io.images import resolve_depth
 
+        check_output_file(output, option="-o", inputs=inputs)
+        resolve_depth(output, depth)  # fail on a bad format before any work
+    pipe = Pipeline.from_yaml(pipeline)
     if overrides:
         pipe = pipe.with_overrides(overrides)
-    frame = read_dng(input)
-    out = pipe(frame, seed=seed)
-    write_image(output, out.data, depth=depth, protect=(input,))
-    typer.echo(f"wrote {output} ({out.width}x{out.height}, {out.kind}, pipeline {pipe.name or pipe.source})")
+    if batch:
+        raise typer.Exit(_render_batch(inputs, output, pipe, depth=depth, seed=seed, fmt=fmt, workers=workers,
+                                       scheduler=scheduler, resume=resume))
+    from tqdm import tqdm
+
+    from ..io.dng import read_dng
+
+    frame = read_dng(inputs[0])
+    # a bar for large frames on a terminal only (disable=None: silent when stderr is not a TTY)
+    with tqdm(total=len(pipe.stages), desc=f"render {inputs[0].name}", unit="stage", leave=False,
+              disable=None if frame.width * frame.height >= 4_000_000 else True) as bar:
+        info = render_file(inputs[0], output, pipeline=pipe, depth=depth, seed=seed,
+                           progress=lambda name: (bar.set_postfix_str(name), bar.update(1)))
+    typer.echo(f"wrote {output} ({info['width']}x{info['height']}, {info['kind']}, pipeline {pipe.name or pipe.source})")
 
 
-def validate(pipeline: Path = typer.Argument(..., help="Pipeline YAML file.")) -> None:
+def _render_batch(inputs, out_dir: Path, pipe, *, depth, seed, fmt, workers, scheduler, resume) -> int:
+    from ..batch import BatchConfig, Task, report, run_batch
+    from ..errors import SimcamError
+    from ..io.images import resolve_depth
+    from ..io.inputs import expand_inputs
+    from ..io.outputs import check_output_dir
+    from ..jobs import render_job
+
+    files = expand_inputs(inputs, suffixes=(".dng",), what="DNG")
+    check_output_dir(out_dir, option="-o", inputs=files)
+    ext = "." + fmt.lower().lstrip(".")
+    resolve_depth(out_dir / f"x{ext}", depth)  # fail on a bad format before any work
+    stems: dict[str, Path] = {}
+    for f in files:
+        if f.stem in stems:
+            raise SimcamError(f"{f}: same name as {stems[f.stem]}; both would write {out_dir / (f.stem + ext)}")
+        stems[f.stem] = f
+    out_dir.mkdir(parents=True, exist_ok=True)
+    doc = pipe.to_dict()
+    tasks = [Task(str(f), {"input": str(f), "output": str(out_dir / f"{f.stem}{ext}"), "pipeline": doc,
+                           "depth": depth, "seed": seed, "index": i}, outputs=(str(out_dir / f"{f.stem}{ext}"),))
+             for i, f in enumerate(files)]
+    outcomes = run_batch(render_job, tasks, BatchConfig(workers=workers, scheduler=scheduler, resume=resume),
+                         label="render")
+    done = sum(o.ok and not o.skipped for o in outcomes)
+    skipped = sum(o.skipped for o in outcomes)
+    typer.echo(f"rendered {done} of {len(tasks)} DNGs into {out_dir}" + (f" ({skipped} already there)" if skipped else ""))
+    return report(outcomes, command="simcam render")
+
+
+def validate(pipeline: Path = typer.Argument(..., metavar="PIPELINE", help="Pipeline YAML file.")) -> None:
     """Check a pipeline file: stage types, parameters and order."""
     from ..pipeline import Pipeline
 

@@ -81,6 +81,9 @@ def write_image(path: str | Path, data: np.ndarray, *, depth: str | int | None =
     h, w, c = samples.shape
     type_desc = {"uint8": oiio.UINT8, "uint16": oiio.UINT16, "float32": oiio.FLOAT, "half": oiio.HALF}[dtype]
     spec = oiio.ImageSpec(w, h, c, type_desc)
+    # OpenImageIO stamps TIFF/EXR with the write time unless told otherwise: the same render
+    # would give different bytes on every run. No DateTime unless the caller gives one.
+    spec.attribute("DateTime", "")
     for k, v in (attributes or {}).items():
         spec.attribute(k, v)
     if not path.parent.exists():
