@@ -56,10 +56,11 @@ class LoopConfig:
     max_pixels: int = DEFAULT_MAX_PIXELS  # pixels analysed per frame (whole frame up to this, else a tile mosaic)
     tile: int = DEFAULT_TILE
     progress: bool | None = None  # progress bars (None: when the output is a terminal)
+    kl_tolerance: float = 0.10  # relative growth of held-out KL still accepted (plus twice its sampling floor)
 
     def region(self) -> Region:
+        """The pixels the residual battery and the bootstrap analyse (:mod:`simcam.calibration.region`)."""
         return Region(max_pixels=self.max_pixels, tile=self.tile, max_size=self.max_size)
-    kl_tolerance: float = 0.10  # relative growth of held-out KL still accepted (plus twice its sampling floor)
 
 
 @dataclass

@@ -122,9 +122,10 @@ def emva1288_mono(seqs: list[Sequence], site: int = 4) -> dict | None:
     # saturation: maximum of the variance curve, scanned backwards (reference implementation)
     max_, isat = 0.0, 0
     for i in range(len(s2_y) - 1, -1, -1):
-        if s2_y[i] >= max_ or s2_y[abs(i - 1)] >= max_:
+        prev = s2_y[i - 1] if i > 0 else s2_y[i]  # (the reference reads s2_y[1] at i = 0: two points gave isat 0)
+        if s2_y[i] >= max_ or prev >= max_:
             max_, isat = s2_y[i], i
-        elif s2_y[i] < max_ and s2_y[abs(i - 1)] < max_:
+        elif s2_y[i] < max_ and prev < max_:
             break
     Y = u_y - u_yd
     below = np.argwhere(Y <= 0.7 * Y[isat])
