@@ -1,0 +1,201 @@
+"""The independent simulator against closed forms (EMVA 1288 R4.0) and the file round trips."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+
+import numpy as np
+import pytest
+
+from tests.indepsim.capture import write_capture_set
+from tests.indepsim.cases import CASES, case_spec
+from tests.indepsim.effects import REGISTRY
+from tests.indepsim.sensor import SensorModel, SensorSpec
+
+
+def _frames(model, kind, iso, t, flux, n, seed=0):
+    return np.stack([model.frame(kind, iso, t, flux, np.random.default_rng([seed, i]), i, n).astype(np.float64)
+                     for i in range(n)])
+
+
+def test_photon_transfer_gives_gain_and_read_noise():
+    """EMVA 1288 R4.0 eq. 8: var_y = K^2 sigma_d^2 + sigma_q^2 + K (mu_y - mu_dark)."""
+    sp = SensorSpec(width=128, height=128, bits=14, black_dn=512.0, full_well_e=12000.0)
+    m = SensorModel(sp, {}, seed=1)
+    iso = 400
+    K = sp.gain(iso)
+    dark = _frames(m, "dark", iso, 0.01, 0.0, 2)
+    mu_d = dark.mean()
+    var_d = np.var(dark[0] - dark[1]) / 2
+    means, varis = [], []
+    for lv in (0.1, 0.25, 0.4, 0.55, 0.7):
+        f = _frames(m, "flat", iso, 0.01, lv * sp.saturation_e(iso) / 0.01, 2)
+        means.append(f.mean() - mu_d)
+        varis.append(np.var(f[0] - f[1]) / 2 - var_d)
+    slope = np.polyfit(means, varis, 1)[0]
+    n = sp.width * sp.height
+    # std error of a variance from n pixels ~ var*sqrt(2/n); the slope is at worst that relative
+    assert slope == pytest.approx(K, rel=5 * np.sqrt(2 / n) * 3)
+    sigma_d_e = np.sqrt(max(var_d - 1 / 12, 0)) / K
+    expect = np.hypot(sp.read_noise_e, sp.adc_noise_dn / K)
+    assert sigma_d_e == pytest.approx(expect, rel=5 * np.sqrt(1 / (2 * n)) + 0.02)
+
+
+def test_dark_current_mean_is_linear_in_exposure():
+    sp = SensorSpec(width=96, height=96, bits=16, black_dn=1024.0)
+    m = SensorModel(sp, {"dark_current": {"rate_e_per_s": 20.0, "spread": 0.5}}, seed=2)
+    rate = float(m.effects[0].rate.mean())
+    iso = 200
+    K = sp.gain(iso)
+    ts = np.array([0.5, 1.0, 2.0, 4.0])
+    mu = np.array([_frames(m, "dark", iso, t, 0.0, 2).mean() - sp.black_dn for t in ts])
+    slope, icpt = np.polyfit(ts, mu, 1)
+    n = 2 * sp.width * sp.height
+    se = K * np.sqrt(rate * ts.max() + sp.read_noise_e ** 2) / np.sqrt(n)
+    assert slope == pytest.approx(K * rate, rel=0.01)
+    assert abs(icpt) < 6 * se
+    # Poisson: the temporal variance grows by K^2 * rate * t
+    d = _frames(m, "dark", iso, 4.0, 0.0, 2)
+    var = np.var(d[0] - d[1]) / 2
+    expect = K ** 2 * (rate * 4.0 + sp.read_noise_e ** 2) + sp.adc_noise_dn ** 2 + 1 / 12
+    assert var == pytest.approx(expect, rel=5 * np.sqrt(2 / (sp.width * sp.height)))
+
+
+def test_dsnu_and_prnu_magnitudes():
+    sp = SensorSpec(width=128, height=128, bits=16, black_dn=1024.0, full_well_e=20000.0)
+    m = SensorModel(sp, {"dsnu": {"sigma_dn": 3.0}, "prnu": {"sigma_rel": 0.02}}, seed=3)
+    iso, N = 100, 16
+    dark = _frames(m, "dark", iso, 0.01, 0.0, N)
+    spatial = dark.mean(0).var() - dark.var(0, ddof=1).mean() / N
+    npx = sp.width * sp.height
+    assert np.sqrt(spatial) == pytest.approx(3.0, rel=5 * np.sqrt(1 / (2 * npx)) + 0.01)
+    assert np.sqrt(spatial) == pytest.approx(float(next(e for e in m.effects if e.name == "dsnu").map.std()), rel=0.02)
+    K = sp.gain(iso)
+    mu_e = 0.5 * sp.saturation_e(iso)
+    flat = _frames(m, "flat", iso, 0.01, mu_e / 0.01, N)
+    sig = flat.mean(0) - dark.mean(0)  # removes DSNU
+    spatial_f = sig.var() - (flat.var(0, ddof=1).mean() + dark.var(0, ddof=1).mean()) / N
+    prnu = np.sqrt(spatial_f) / sig.mean()
+    assert prnu == pytest.approx(0.02, rel=5 * np.sqrt(1 / (2 * npx)) + 0.02)
+    assert sig.mean() == pytest.approx(K * mu_e, rel=0.005)
+
+
+def test_charge_crosstalk_lowers_flat_variance_not_dark():
+    sp = SensorSpec(width=128, height=128, bits=16, black_dn=1024.0, read_noise_e=3.0, adc_noise_dn=0.0,
+                    full_well_e=40000.0)
+    f = 0.05
+    m0, m1 = SensorModel(sp, {}, 4), SensorModel(sp, {"charge_crosstalk": {"fraction": f}}, 4)
+    mu = 20000.0
+    v = [np.var(np.diff(_frames(m, "flat", 100, 1.0, mu, 2), axis=0)) / 2 for m in (m0, m1)]
+    K = sp.gain(100)
+    shot0 = v[0] - (K * 3.0) ** 2 - 1 / 12
+    shot1 = v[1] - (K * 3.0) ** 2 - 1 / 12
+    assert shot1 / shot0 == pytest.approx((1 - 4 * f) ** 2 + 4 * f ** 2, rel=0.05)
+
+
+def test_capture_round_trip_rawpy_and_simcam(tmp_path):
+    rawpy = pytest.importorskip("rawpy")
+    from simcam.dataset.capture import read_capture_set
+
+    spec = {"sensor": {"width": 64, "height": 48, "cfa": "GRBG", "black_dn": [[256, 260], [252, 258]]},
+            "effects": {"dsnu": {"sigma_dn": 2.0}}, "isos": [100, 800],
+            "darks": {"exposures_s": [0.02], "frames": 3}, "flats": {"exposure_s": 0.01, "levels": [0.3],
+                                                                    "frames": 3},
+            "scene": {"exposure_s": 0.01, "level": 0.5, "frames": 2}, "fmt": "dng"}
+    truth = write_capture_set(tmp_path / "dng", spec, seed=5)
+    spec["fmt"] = "npy"
+    write_capture_set(tmp_path / "npy", spec, seed=5)
+    cs_d = read_capture_set(tmp_path / "dng")
+    cs_n = read_capture_set(tmp_path / "npy")
+    assert [s.name for s in cs_d.sequences] == sorted(s["name"] for s in truth["sequences"])
+    for sd, sn in zip(cs_d.sequences, cs_n.sequences):
+        assert np.array_equal(sd.frames, sn.frames)  # same pixels through both writers
+        assert sd.cfa == sn.cfa == "GRBG"
+        assert np.array_equal(sd.black_dn, [[256, 260], [252, 258]])
+        assert np.array_equal(sn.black_dn, [[256, 260], [252, 258]])
+        assert sd.white_dn == sn.white_dn == 4095
+        plan = next(p for p in truth["sequences"] if p["name"] == sd.name)
+        assert sd.iso == sn.iso == plan["iso"] and sd.kind == plan["kind"]
+        assert sd.exposure_s == pytest.approx(plan["exposure_s"], rel=1e-6)
+        assert sn.exposure_s == pytest.approx(plan["exposure_s"], rel=1e-6)
+        files = sorted((tmp_path / "dng" / sd.name).glob("*.dng"))
+        for i, fpath in enumerate(files):
+            with rawpy.imread(str(fpath)) as r:
+                assert np.array_equal(r.raw_image, sd.frames[i].astype(np.uint16))
+                assert r.white_level == 4095
+                # rawpy orders black per colour index (R, G, B, G2)
+                assert sorted(r.black_level_per_channel) == [252, 256, 258, 260]
+            assert np.array_equal(np.load(tmp_path / "npy" / sd.name / f"frame_{i:03d}.npy"), sn.frames[i])
+
+
+def test_emva1288_descriptor_round_trip(tmp_path):
+    from simcam.dataset.capture import read_capture_set
+
+    spec = {"sensor": {"width": 40, "height": 32, "cfa": None, "bits": 12}, "isos": [100],
+            "darks": {"exposures_s": [0.01], "frames": 2}, "flats": {"exposure_s": 0.01, "levels": [0.2, 0.5],
+                                                                    "frames": 2},
+            "scene": None, "fmt": "emva"}
+    truth = write_capture_set(tmp_path, spec, seed=6)
+    cs = read_capture_set(tmp_path)
+    assert cs.layout == "emva1288" and [s.kind for s in cs.sequences] == ["dark", "flat", "flat"]
+    spec["fmt"] = "npy"
+    write_capture_set(tmp_path / "ref", spec, seed=6)
+    ref = read_capture_set(tmp_path / "ref")
+    for s, r in zip(cs.sequences, ref.sequences):
+        assert np.array_equal(s.frames, r.frames)
+    flats = [p for p in truth["sequences"] if p["kind"] == "flat"]
+    assert [s.photons for s in cs.sequences[1:]] == pytest.approx([p["photons_per_pixel"] for p in flats], rel=1e-5)
+
+
+def test_same_seed_same_bytes(tmp_path):
+    spec = case_spec(next(c for c in CASES if c["name"] == "pair_dsnu__dark_current"))
+    spec.update({"isos": [100], "darks": {"exposures_s": [0.5], "frames": 2}, "flats": None, "scene": None,
+                 "fmt": "npy"})
+    spec["sensor"] = {"width": 32, "height": 32}
+    digests = []
+    for d in ("a", "b"):
+        write_capture_set(tmp_path / d, spec, seed=9)
+        digests.append(hashlib.sha256(b"".join(p.read_bytes() for p in sorted((tmp_path / d).rglob("*.npy"))))
+                       .hexdigest())
+    assert digests[0] == digests[1]
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c["name"] for c in CASES])
+def test_every_case_runs_and_records_truth(case, tmp_path):
+    spec = case_spec(case)
+    for k, r in REGISTRY.items():
+        assert set(r.ranges)  # every effect documents a range
+    for name, params in spec["effects"].items():
+        cls = REGISTRY[name]
+        for p, v in params.items():
+            lo, hi = cls.ranges[p]
+            assert lo <= v <= hi
+    spec.setdefault("sensor", {})
+    spec["sensor"] = dict(spec["sensor"], width=24, height=24)
+    spec.update({"isos": spec.get("isos", [100])[:1]})
+    for k in ("darks", "flats", "scene"):
+        if spec.get(k, True) is not None:
+            base = {"darks": {"exposures_s": [0.5], "frames": 2},
+                    "flats": {"exposure_s": 0.01, "levels": [0.4], "frames": 2},
+                    "scene": {"exposure_s": 0.01, "level": 0.5, "frames": 2}}[k]
+            spec[k] = base if spec.get("fmt") != "emva" or k != "scene" else None
+    if spec.get("fmt") == "dng" or "fmt" not in spec:
+        spec["fmt"] = "npy"  # tiny frames: LibRaw refuses < 22 px, the DNG path is tested above
+    truth = write_capture_set(tmp_path, spec, seed=case["seed"])
+    from simcam.dataset.capture import read_capture_set
+
+    cs = read_capture_set(tmp_path)  # the input contract: sizes, metadata, unsaturated flats
+    assert len(cs.sequences) == sum(1 for p in truth["sequences"] if spec["fmt"] != "emva" or p["kind"] != "scene")
+    on_disk = json.loads((tmp_path / "truth.json").read_text())
+    assert sorted(on_disk["effects"]) == sorted(case["effects"]) and on_disk["held_out"] == case["held_out"]
+    for name in case["effects"]:
+        if name.startswith("undeclared_"):
+            fam = truth["effects"][name]["family"]
+            assert fam["time"] in ("temporal", "fixed") and fam["mode"] in ("additive", "multiplicative")
+            assert fam["support"] in ("pixel", "row", "column", "frame", "smooth_field", "code")
+
+
+def test_held_out_share():
+    share = np.mean([c["held_out"] for c in CASES])
+    assert 0.2 <= share <= 0.4
