@@ -244,9 +244,14 @@ class PeriodicPattern(Effect):
 
 class BlackLevelOffset(Effect):
     """The true black level differs from the declared (metadata) black by ``offset_dn`` DN
-    (black clamp error); the sign is drawn with the magnitude."""
+    (black clamp error). Draw: ``|offset_dn|`` log-uniform in [1, 12] DN, sign +/- with equal odds."""
     name, order = "black_level_offset", 5
     ranges = {"offset_dn": (-12.0, 12.0)}
+
+    @classmethod
+    def draw(cls, rng):
+        mag = float(np.exp(rng.uniform(np.log(1.0), np.log(12.0))))
+        return {"offset_dn": mag if rng.uniform() < 0.5 else -mag}
 
     def adjust_black(self, m):
         m.black_true = m.black_true + np.float32(self.offset_dn)
