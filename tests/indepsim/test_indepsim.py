@@ -199,3 +199,79 @@ def test_every_case_runs_and_records_truth(case, tmp_path):
 def test_held_out_share():
     share = np.mean([c["held_out"] for c in CASES])
     assert 0.2 <= share <= 0.4
+
+
+def _one(effects, kind="dark", iso=100, t=0.02, level=0.0, n=8, seed=7, **sensor):
+    sp = SensorSpec(**{"width": 96, "height": 96, "bits": 16, "black_dn": 1024.0, **sensor})
+    m = SensorModel(sp, effects, seed=seed)
+    flux = level * sp.saturation_e(iso) / t
+    return sp, m, _frames(m, kind, iso, t, flux, n, seed)
+
+
+def test_row_noise_and_column_fpn_magnitudes():
+    sp, m, f = _one({"row_noise": {"sigma_e": 3.0}, "column_fpn": {"sigma_dn": 8.0}}, iso=100, n=16)
+    K = sp.gain(100)
+    white = np.hypot(K * sp.read_noise_e, sp.adc_noise_dn)
+    # temporal per-row offset: variance of (row mean - its time average) minus white-noise share
+    rm = f.mean(2)
+    row_var = (rm - rm.mean(0)).var(ddof=0) * f.shape[0] / (f.shape[0] - 1) - white ** 2 / sp.width
+    assert np.sqrt(row_var) == pytest.approx(K * 3.0, rel=0.15)  # 96 rows x 16 frames
+    cm = f.mean((0, 1))
+    col_var = cm.var() - white ** 2 / (f.shape[0] * sp.height)  # row offsets are common to all columns
+    assert np.sqrt(col_var) == pytest.approx(float(next(e for e in m.effects if e.name == "column_fpn").col.std()),
+                                             rel=0.1)
+
+
+def test_quantization_codes_are_steps():
+    _, m, f = _one({"quantization": {"step_dn": 8}}, n=2)
+    assert np.all(f % 8 == 0)
+
+
+def test_dead_and_stuck_pixels():
+    sp, m, f = _one({"dead_pixels": {"fraction": 1e-3}, "stuck_pixels": {"fraction": 5e-4, "white_share": 1.0}},
+                    kind="flat", t=0.01, level=0.5, n=2)
+    dead = next(e for e in m.effects if e.name == "dead_pixels").idx
+    stuck = next(e for e in m.effects if e.name == "stuck_pixels").idx
+    flat = f.reshape(2, -1)
+    assert np.all(np.abs(flat[:, np.setdiff1d(dead, stuck)] - sp.black_dn) < 8 * sp.read_noise_e * sp.gain(100) + 4)
+    assert np.all(flat[:, stuck] == sp.white_dn)
+
+
+def test_amp_glow_grows_with_exposure_towards_a_corner():
+    sp, m, f1 = _one({"amp_glow": {"rate_e_per_s": 100.0, "length_frac": 0.2}}, t=1.0, n=2)
+    _, _, f4 = _one({"amp_glow": {"rate_e_per_s": 100.0, "length_frac": 0.2}}, t=4.0, n=2)
+    g = next(e for e in m.effects if e.name == "amp_glow").map
+    K = sp.gain(100)
+    for f, t in ((f1, 1.0), (f4, 4.0)):
+        assert f.mean() - sp.black_dn == pytest.approx(K * g.mean() * t, rel=0.03)
+    corner = np.unravel_index(np.argmax(g), g.shape)
+    assert corner in ((0, 0), (0, 95), (95, 0), (95, 95))
+
+
+def test_rtn_pixels_are_bimodal():
+    sp, m, f = _one({"rtn": {"fraction": 0.01, "amplitude_e": 200.0, "p_high": 0.5}}, n=16)
+    e = next(x for x in m.effects if x.name == "rtn")
+    v = f.reshape(16, -1)[:, e.idx]
+    K = sp.gain(100)
+    # each RTN pixel's temporal variance ~ p(1-p) (K A)^2 + read: far above the others
+    expect = 0.25 * (K * e.amp) ** 2 + (K * sp.read_noise_e) ** 2 + sp.adc_noise_dn ** 2
+    ratio = v.var(0, ddof=1) / expect
+    assert 0.5 < np.median(ratio) < 1.5
+
+
+def test_hot_pixels_count_and_level():
+    sp, m, f = _one({"hot_pixels": {"fraction": 2e-3, "offset_e": 500.0, "rate_e_per_s": 100.0}}, t=2.0, n=4)
+    e = next(x for x in m.effects if x.name == "hot_pixels")
+    K = sp.gain(100)
+    got = f.mean(0).reshape(-1)[e.idx] - sp.black_dn
+    np.testing.assert_allclose(got, K * (e.off + e.rate * 2.0), rtol=0.25, atol=1.0)
+
+
+def test_spatial_correlation_adjacent_correlation():
+    c = 0.06
+    sp, m, f = _one({"spatial_correlation": {"coupling": c}}, n=8, width=128, height=128)
+    d = f - f.mean(0)
+    r = np.mean(d[:, :, 1:] * d[:, :, :-1]) / np.mean(d * d)
+    expect = 2 * c * (1 - 4 * c) / ((1 - 4 * c) ** 2 + 4 * c ** 2)
+    n = d.size
+    assert r == pytest.approx(expect, abs=6 / np.sqrt(n) + 0.01)  # quantisation adds a little white noise
