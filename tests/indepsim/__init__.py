@@ -55,9 +55,10 @@ Every effect's magnitude range is ``Effect.ranges`` (log-uniform for ``Effect.lo
 Capture sets (``capture.py``)
 -----------------------------
 ``write_capture_set(out_dir, spec, seed)``: per ISO (default 100, 800, 3200) darks at 0.02 s and
-2 s x 16 frames, flats at 15 % and 55 % of saturation x 12 frames, one scene x 16 frames,
+2 s x 16 frames, flats at 15 % and 55 % of saturation x 12 frames, one scene x 16 frames (mean
+40 % of saturation, peaks ~70-90 %),
 128 x 192 pixels, 12-bit RGGB, black 256 DN. Formats: ``dng`` (own writer on tifffile,
-``dngwrite.py``; LibRaw needs >= 22 px a side), ``npy`` + ``sequence.yaml``, ``emva``
+``dngwrite.py``; LibRaw refused a 24 x 16 test image, 96 x 64 reads), ``npy`` + ``sequence.yaml``, ``emva``
 (EMVA 1288 descriptor + PNGs, monochrome; scenes are not written). Frames are generated one
 by one (a 4000 x 3000 frame peaks near 0.7 GB, ~4 s). ``truth.json`` holds the sensor in
 physical units (K per ISO, input read noise, saturation), the true black, each effect's

@@ -25,7 +25,7 @@ DEFAULT_SPEC = {
     "isos": [100, 800, 3200],
     "darks": {"exposures_s": [0.02, 2.0], "frames": 16},
     "flats": {"exposure_s": 0.01, "levels": [0.15, 0.55], "frames": 12},
-    "scene": {"exposure_s": 0.01, "level": 0.6, "frames": 16},
+    "scene": {"exposure_s": 0.01, "level": 0.4, "frames": 16},
     "fmt": "dng",
 }
 

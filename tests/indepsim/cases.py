@@ -71,7 +71,7 @@ def _build():
         _case("special_flats_only", ("prnu",), seed=27, darks=None, scene=None),
         _case("special_two_frames", ("dsnu",), seed=28, darks={"exposures_s": [0.02, 2.0], "frames": 2},
               flats={"exposure_s": 0.01, "levels": [0.15, 0.55], "frames": 2},
-              scene={"exposure_s": 0.01, "level": 0.6, "frames": 2}),
+              scene={"exposure_s": 0.01, "level": 0.4, "frames": 2}),
         _case("special_coarse_quantization_16bit", ("quantization",), seed=29,
               sensor={"bits": 16, "black_dn": 4096.0, "full_well_e": 30000.0}),
         _case("special_14bit_bggr", ("dark_current", "prnu"), seed=30,

@@ -81,9 +81,12 @@ class Effect:
     def output(self, m, code, ctx): return code
 
     def truth(self) -> dict:
-        d = {"params": dict(self.params), "doc": (self.__doc__ or "").strip().splitlines()[0]}
+        d = {"params": dict(self.params), "doc": " ".join(x.strip() for x in (self.__doc__ or "").split())}
         if self.family:
-            d["family"] = dict(self.family)
+            f = self.family
+            d["family"] = dict(f)
+            d["family_str"] = (f"{f['time']};{f['support']};{f['mode']};"
+                               f"exposure_dependent={'true' if f['exposure_dependent'] else 'false'}")
         return d
 
 

@@ -157,14 +157,12 @@ class SensorModel:
         self.spec = spec
         self.seed = int(seed)
         self.effects = []
-        fixed_rng = np.random.default_rng([self.seed, 1])
         for name in sorted(effects or {}):
             cls = fx.REGISTRY[name]
             e = cls(**(effects[name] or {}))
             e.setup(self, np.random.default_rng([self.seed, 2, fx.stable_id(name)]))
             self.effects.append(e)
         self.effects.sort(key=lambda e: e.order)
-        self._fixed_rng = fixed_rng
         H, W = spec.height, spec.width
         self.chan = channel_index(H, W, spec.cfa)  # 0..3 site index (dy*2+dx) or zeros for mono
         self.black_true = spec.black_map2()[np.arange(H)[:, None] % 2, np.arange(W)[None, :] % 2].astype(np.float32)

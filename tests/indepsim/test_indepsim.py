@@ -181,7 +181,7 @@ def test_every_case_runs_and_records_truth(case, tmp_path):
                     "scene": {"exposure_s": 0.01, "level": 0.5, "frames": 2}}[k]
             spec[k] = base if spec.get("fmt") != "emva" or k != "scene" else None
     if spec.get("fmt") == "dng" or "fmt" not in spec:
-        spec["fmt"] = "npy"  # tiny frames: LibRaw refuses < 22 px, the DNG path is tested above
+        spec["fmt"] = "npy"  # tiny frames: LibRaw refuses very small DNGs; the DNG path is tested above
     truth = write_capture_set(tmp_path, spec, seed=case["seed"])
     from simcam.dataset.capture import read_capture_set
 
