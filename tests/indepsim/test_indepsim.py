@@ -275,3 +275,31 @@ def test_spatial_correlation_adjacent_correlation():
     expect = 2 * c * (1 - 4 * c) / ((1 - 4 * c) ** 2 + 4 * c ** 2)
     n = d.size
     assert r == pytest.approx(expect, abs=6 / np.sqrt(n) + 0.01)  # quantisation adds a little white noise
+
+
+def test_adc_dnl_code_occupancy_follows_code_widths():
+    sp, m, f = _one({"adc_dnl": {"inl_dn": 0.3, "major_dn": 0.0}}, kind="flat", t=0.01, level=0.3, n=8,
+                    bits=12, black_dn=256.0)
+    e = next(x for x in m.effects if x.name == "adc_dnl")
+    mu, sd = f.mean(), f.std()
+    codes = np.arange(int(mu - sd), int(mu + sd))
+    counts = np.bincount(f.astype(np.int64).ravel(), minlength=sp.white_dn + 1)[codes]
+    from scipy.stats import norm
+
+    width = e.edges[codes] - e.edges[codes - 1]
+    expect = f.size * (norm.cdf(e.edges[codes], mu, sd) - norm.cdf(e.edges[codes - 1], mu, sd))
+    # counts are binomial around the width-weighted density
+    z = (counts - expect) / np.sqrt(expect)
+    assert np.abs(z).max() < 5
+    ideal = f.size * (norm.cdf(codes + 0.5, mu, sd) - norm.cdf(codes - 0.5, mu, sd))  # equal-width codes
+    assert np.corrcoef(counts / ideal, width)[0, 1] > 0.8
+
+
+def test_undeclared_gain_drift_and_interleaved_adc():
+    sp, m, f = _one({"undeclared_gain_drift": {"drift_rel": 0.04}}, kind="flat", t=0.01, level=0.5, n=8)
+    sig = f.mean((1, 2)) - sp.black_dn
+    assert sig[-1] / sig[0] == pytest.approx(1.02 / 0.98, rel=0.003)
+    sp, m, f = _one({"undeclared_interleaved_adc": {"offset_dn": 3.0, "gain_rel": 0.0}}, n=8)
+    cols = f.mean((0, 1))
+    a, b = cols[(np.arange(sp.width) // 2) % 2 == 0].mean(), cols[(np.arange(sp.width) // 2) % 2 == 1].mean()
+    assert a - b == pytest.approx(3.0, abs=0.2)
