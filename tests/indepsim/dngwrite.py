@@ -65,6 +65,10 @@ def write_dng(path, data: np.ndarray, *, cfa: str | None, black: np.ndarray | fl
     else:
         photometric = 34892  # LinearRaw
         tags += [(50721, SRATIONAL, 3, (1, 1, 1, 1, 1, 1), True)]
+    # tifffile insists on 3 samples for LinearRaw: write BlackIsZero, then patch the tag in place
     with tifffile.TiffWriter(path, bigtiff=False) as tw:
-        tw.write(data, photometric=photometric, subfiletype=0, compression=None, planarconfig=None,
-                 metadata=None, extratags=tags, software="indepsim")
+        tw.write(data, photometric=photometric if cfa is not None else 1, subfiletype=0, compression=None,
+                 planarconfig=None, metadata=None, extratags=tags, software="indepsim")
+    if cfa is None:
+        with tifffile.TiffFile(path, mode="r+b") as tf:
+            tf.pages[0].tags["PhotometricInterpretation"].overwrite(photometric)

@@ -303,3 +303,17 @@ def test_undeclared_gain_drift_and_interleaved_adc():
     cols = f.mean((0, 1))
     a, b = cols[(np.arange(sp.width) // 2) % 2 == 0].mean(), cols[(np.arange(sp.width) // 2) % 2 == 1].mean()
     assert a - b == pytest.approx(3.0, abs=0.2)
+
+
+def test_monochrome_dng_round_trip_rawpy(tmp_path):
+    rawpy = pytest.importorskip("rawpy")
+    spec = {"sensor": {"width": 64, "height": 48, "cfa": None}, "isos": [200],
+            "darks": {"exposures_s": [0.1], "frames": 2}, "flats": None, "scene": None, "fmt": "dng"}
+    write_capture_set(tmp_path / "d", spec, seed=8)
+    spec["fmt"] = "npy"
+    write_capture_set(tmp_path / "n", spec, seed=8)
+    for i in range(2):
+        with rawpy.imread(str(tmp_path / "d" / "dark_iso200_t100ms" / f"frame_{i:03d}.dng")) as r:
+            ref = np.load(tmp_path / "n" / "dark_iso200_t100ms" / f"frame_{i:03d}.npy")
+            assert np.array_equal(r.raw_image, ref) and r.white_level == 4095
+            assert list(r.black_level_per_channel) == [256] * 4
