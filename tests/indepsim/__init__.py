@@ -63,8 +63,10 @@ Capture sets (``capture.py``)
 by one (a 4000 x 3000 frame peaks near 0.7 GB, ~4 s). ``truth.json`` holds the sensor in
 physical units (K per ISO, input read noise, saturation), the true black, each effect's
 parameters (plus derived truth: site gains, DNL rms, glow corner, mean dark rate) and the
-planned sequences (mean e-, photons per pixel). Simcam's DNG reader refuses LinearRaw, so
-monochrome sets use ``npy`` or ``emva``.
+planned sequences (mean e-, photons per pixel). Monochrome DNGs are LinearRaw (rawpy reads
+them); simcam's DNG reader refuses LinearRaw, so the monochrome cases use ``npy`` or ``emva``.
+An undeclared effect's ``family`` has keys ``time``, ``support``, ``mode``,
+``exposure_dependent`` plus ``family_str`` ("temporal;column;additive;exposure_dependent=false").
 
 Command line::
 

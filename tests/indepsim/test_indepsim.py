@@ -317,3 +317,20 @@ def test_monochrome_dng_round_trip_rawpy(tmp_path):
             ref = np.load(tmp_path / "n" / "dark_iso200_t100ms" / f"frame_{i:03d}.npy")
             assert np.array_equal(r.raw_image, ref) and r.white_level == 4095
             assert list(r.black_level_per_channel) == [256] * 4
+
+
+def test_heavy_tail_read_kurtosis():
+    nu = 10.0
+    sp, m, f = _one({"heavy_tail_read": {"nu": nu}}, iso=800, n=8, read_noise_e=3.0)
+    K = sp.gain(800)
+    d = (f - f.mean(0)).ravel() * np.sqrt(8 / 7)
+    var_r = (K * sp.read_noise_e) ** 2
+    var = var_r + sp.adc_noise_dn ** 2 + 1 / 12
+    assert d.var() == pytest.approx(var, rel=0.03)
+    # Student-t excess kurtosis 6/(nu-4), diluted by the Gaussian parts (cumulants add); the residual
+    # x_i - mean(x) = sum_j a_j x_j scales it by sum(a^4) / (sum(a^2))^2 (a_i = 1 - 1/n, else -1/n)
+    n = 8
+    a = np.r_[1 - 1 / n, np.full(n - 1, -1 / n)]
+    ex = np.mean(d ** 4) / np.mean(d ** 2) ** 2 - 3
+    expect = 6 / (nu - 4) * (var_r / var) ** 2 * np.sum(a ** 4) / np.sum(a ** 2) ** 2
+    assert ex == pytest.approx(expect, abs=0.25)  # ~4 standard errors of a heavy-tailed kurtosis at 74k samples
