@@ -15,7 +15,6 @@ from pathlib import Path
 
 import numpy as np
 
-from .effects import REGISTRY
 from .sensor import SensorModel, SensorSpec, scene_field
 
 #: the standard set shape (small by default; sizes are spec["sensor"]["width"/"height"])
@@ -52,10 +51,16 @@ def sequences_of(spec: dict, sensor: SensorSpec) -> list[dict]:
                 seqs.append({"name": f"dark_iso{iso}_t{_ms(t)}ms", "kind": "dark", "iso": iso, "exposure_s": t,
                              "mean_e": 0.0, "frames": spec["darks"]["frames"]})
         if spec.get("flats"):
-            t = spec["flats"]["exposure_s"]
-            for lv in spec["flats"]["levels"]:
-                seqs.append({"name": f"flat_iso{iso}_l{int(round(lv * 100)):02d}", "kind": "flat", "iso": iso,
-                             "exposure_s": t, "mean_e": lv * sat, "frames": spec["flats"]["frames"]})
+            fl = spec["flats"]
+            t = fl["exposure_s"]
+            if "photons_per_s" in fl:  # absolute irradiance: photons / pixel / s, converted with the QE
+                for q in fl["photons_per_s"]:
+                    seqs.append({"name": f"flat_iso{iso}_p{q:.0f}", "kind": "flat", "iso": iso, "exposure_s": t,
+                                 "mean_e": q * sensor.qe * t, "frames": fl["frames"]})
+            else:  # ``levels``: fraction of the saturation charge at this ISO
+                for lv in fl["levels"]:
+                    seqs.append({"name": f"flat_iso{iso}_l{round(lv * 100):02d}", "kind": "flat", "iso": iso,
+                                 "exposure_s": t, "mean_e": lv * sat, "frames": fl["frames"]})
         if spec.get("scene"):
             sc = spec["scene"]
             seqs.append({"name": f"scene_iso{iso}", "kind": "scene", "iso": iso, "exposure_s": sc["exposure_s"],

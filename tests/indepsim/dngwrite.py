@@ -49,7 +49,7 @@ def write_dng(path, data: np.ndarray, *, cfa: str | None, black: np.ndarray | fl
         (50714, RATIONAL, len(vals), tuple(black_rat), True),  # BlackLevel
         (50717, LONG, 1, int(white), True),  # WhiteLevel
         (33434, RATIONAL, 1, _rational(exposure_s), True),  # ExposureTime
-        (34855, SHORT, 1, int(round(iso)), True),  # ISOSpeedRatings
+        (34855, SHORT, 1, round(iso), True),  # ISOSpeedRatings
     ]
     if cfa is not None:
         photometric = 32803

@@ -14,6 +14,7 @@ University, 2020, chapter 2 (noise sources); J. Janesick, "Photon Transfer", SPI
 from __future__ import annotations
 
 import zlib
+from typing import ClassVar
 
 import numpy as np
 
@@ -40,9 +41,9 @@ def _shift_sum4(a):
 class Effect:
     name = ""
     order = 50
-    ranges: dict = {}
+    ranges: ClassVar[dict] = {}
     log_params: tuple = ()
-    family: dict | None = None
+    family: ClassVar[dict | None] = None
 
     def __init__(self, **params):
         unknown = set(params) - set(self.ranges)
@@ -97,7 +98,7 @@ class RowNoise(Effect):
     ``sigma_e``: rms of the per-row offset, input-referred e- (so in DN it grows with ISO).
     """
     name, order = "row_noise", 60
-    ranges = {"sigma_e": (0.3, 3.0)}
+    ranges: ClassVar[dict] = {"sigma_e": (0.3, 3.0)}
     log_params = ("sigma_e",)
 
     def read_e(self, m, e, ctx):
@@ -110,7 +111,7 @@ class ColumnFPN(Effect):
     ``sigma_dn``: rms of the per-column offset in DN (post-gain, ISO-independent).
     """
     name, order = "column_fpn", 70
-    ranges = {"sigma_dn": (0.3, 4.0)}
+    ranges: ClassVar[dict] = {"sigma_dn": (0.3, 4.0)}
     log_params = ("sigma_dn",)
 
     def setup(self, m, rng):
@@ -126,7 +127,7 @@ class DSNU(Effect):
     ``sigma_dn``: rms of the per-pixel offset in DN, Gaussian (EMVA 1288 R4.0 sec. 8, DSNU).
     """
     name, order = "dsnu", 70
-    ranges = {"sigma_dn": (0.3, 5.0)}
+    ranges: ClassVar[dict] = {"sigma_dn": (0.3, 5.0)}
     log_params = ("sigma_dn",)
 
     def setup(self, m, rng):
@@ -143,7 +144,7 @@ class PRNU(Effect):
     the mean photo-electrons, so the shot noise follows the pixel's own mean.
     """
     name, order = "prnu", 10
-    ranges = {"sigma_rel": (0.003, 0.03)}
+    ranges: ClassVar[dict] = {"sigma_rel": (0.003, 0.03)}
     log_params = ("sigma_rel",)
 
     def setup(self, m, rng):
@@ -161,12 +162,12 @@ class HotPixels(Effect):
     ``rate_e_per_s``: median extra dark current (e-/s, log-normal spread 0.7). Poisson-sampled.
     """
     name, order = "hot_pixels", 20
-    ranges = {"fraction": (2e-4, 2e-3), "offset_e": (50.0, 600.0), "rate_e_per_s": (20.0, 500.0)}
+    ranges: ClassVar[dict] = {"fraction": (2e-4, 2e-3), "offset_e": (50.0, 600.0), "rate_e_per_s": (20.0, 500.0)}
     log_params = ("fraction", "offset_e", "rate_e_per_s")
 
     def setup(self, m, rng):
         H, W = m.spec.height, m.spec.width
-        n = max(1, int(round(self.fraction * H * W)))
+        n = max(1, round(self.fraction * H * W))
         self.idx = rng.choice(H * W, n, replace=False)
         self.off = (self.offset_e * rng.lognormal(0, 0.5, n)).astype(np.float32)
         self.rate = (self.rate_e_per_s * rng.lognormal(0, 0.7, n)).astype(np.float32)
@@ -183,7 +184,7 @@ class HeavyTailRead(Effect):
     tails). ``nu`` in (2.5, 8): smaller = heavier tails (excess kurtosis 6/(nu-4) for nu>4).
     """
     name, order = "heavy_tail_read", 50
-    ranges = {"nu": (2.5, 8.0)}
+    ranges: ClassVar[dict] = {"nu": (2.5, 8.0)}
 
     def read_noise(self, m, ctx):
         H, W = m.spec.height, m.spec.width
@@ -197,11 +198,11 @@ class Quantization(Effect):
     ``step_dn``: code width in DN (integer 4..16); quantisation variance step^2/12 (EMVA 1288 eq. 6).
     """
     name, order = "quantization", 90
-    ranges = {"step_dn": (4.0, 16.0)}
+    ranges: ClassVar[dict] = {"step_dn": (4.0, 16.0)}
 
     def __init__(self, **p):
         super().__init__(**p)
-        self.step_dn = float(int(round(self.step_dn)))
+        self.step_dn = float(round(self.step_dn))
         self.params["step_dn"] = self.step_dn
 
     def adc(self, m, v, ctx):
@@ -217,7 +218,7 @@ class SpatialCorrelation(Effect):
     on white noise.
     """
     name, order = "spatial_correlation", 80
-    ranges = {"coupling": (0.01, 0.08)}
+    ranges: ClassVar[dict] = {"coupling": (0.01, 0.08)}
 
     def analog_dn(self, m, v, ctx):
         c = np.float32(self.coupling)
@@ -232,7 +233,7 @@ class PeriodicPattern(Effect):
     ``angle_deg``: 0 = vertical bands, near 90 = horizontal banding.
     """
     name, order = "periodic_pattern", 70
-    ranges = {"amplitude_dn": (0.3, 3.0), "period_px": (6.0, 40.0), "angle_deg": (60.0, 89.0)}
+    ranges: ClassVar[dict] = {"amplitude_dn": (0.3, 3.0), "period_px": (6.0, 40.0), "angle_deg": (60.0, 89.0)}
 
     def analog_dn(self, m, v, ctx):
         H, W = v.shape
@@ -249,7 +250,7 @@ class BlackLevelOffset(Effect):
     """The true black level differs from the declared (metadata) black by ``offset_dn`` DN
     (black clamp error). Draw: ``|offset_dn|`` log-uniform in [1, 12] DN, sign +/- with equal odds."""
     name, order = "black_level_offset", 5
-    ranges = {"offset_dn": (-12.0, 12.0)}
+    ranges: ClassVar[dict] = {"offset_dn": (-12.0, 12.0)}
 
     @classmethod
     def draw(cls, rng):
@@ -264,7 +265,7 @@ class FrameFlicker(Effect):
     """Per-frame global change: illumination / gain flicker ``gain_sigma`` (relative rms of a per-frame
     factor on the photo signal) and per-frame black offset ``offset_sigma_dn`` (DN rms)."""
     name, order = "frame_flicker", 12
-    ranges = {"gain_sigma": (0.002, 0.02), "offset_sigma_dn": (0.2, 2.0)}
+    ranges: ClassVar[dict] = {"gain_sigma": (0.002, 0.02), "offset_sigma_dn": (0.2, 2.0)}
     log_params = ("gain_sigma", "offset_sigma_dn")
 
     def mean_signal(self, m, mu, ctx):
@@ -280,7 +281,7 @@ class Nonlinearity(Effect):
     capacitance grows with charge; EMVA 1288 R4.0 sec. 6 linearity). ``beta``: 0.02..0.2, the
     relative compression at full well is beta/(1+beta)."""
     name, order = "nonlinearity", 40
-    ranges = {"beta": (0.02, 0.2)}
+    ranges: ClassVar[dict] = {"beta": (0.02, 0.2)}
 
     def after_full_well(self, m, e, ctx):
         return e / (1 + np.float32(self.beta / m.spec.full_well_e) * np.maximum(e, 0))
@@ -290,7 +291,7 @@ class ChannelGain(Effect):
     """Per-CFA-channel gain mismatch (separate column amplifiers per colour site): the 4 sites of the
     2x2 tile get gains ``1 + sigma_rel * n_c`` (n_c standard normal), fixed."""
     name, order = "channel_gain", 60
-    ranges = {"sigma_rel": (0.01, 0.08)}
+    ranges: ClassVar[dict] = {"sigma_rel": (0.01, 0.08)}
 
     def setup(self, m, rng):
         self.g = np.maximum(1 + rng.standard_normal(4) * self.sigma_rel, 0.5).astype(np.float32)
@@ -309,7 +310,7 @@ class DarkCurrent(Effect):
     """Thermal dark current: Poisson electrons with mean ``rate * t``, the rate per pixel log-normal
     with median ``rate_e_per_s`` (e-/s) and log-sigma ``spread`` (EMVA 1288 R4.0 sec. 7)."""
     name, order = "dark_current", 20
-    ranges = {"rate_e_per_s": (0.5, 30.0), "spread": (0.2, 0.8)}
+    ranges: ClassVar[dict] = {"rate_e_per_s": (0.5, 30.0), "spread": (0.2, 0.8)}
     log_params = ("rate_e_per_s",)
 
     def setup(self, m, rng):
@@ -328,12 +329,12 @@ class DeadPixels(Effect):
     """Dead pixels: no photo-response (broken photodiode); they read black plus read noise whatever
     the light. ``fraction`` of pixels."""
     name, order = "dead_pixels", 11
-    ranges = {"fraction": (1e-4, 1e-3)}
+    ranges: ClassVar[dict] = {"fraction": (1e-4, 1e-3)}
     log_params = ("fraction",)
 
     def setup(self, m, rng):
         H, W = m.spec.height, m.spec.width
-        self.idx = rng.choice(H * W, max(1, int(round(self.fraction * H * W))), replace=False)
+        self.idx = rng.choice(H * W, max(1, round(self.fraction * H * W)), replace=False)
 
     def mean_signal(self, m, mu, ctx):
         mu.reshape(-1)[self.idx] = 0
@@ -344,12 +345,12 @@ class StuckPixels(Effect):
     """Stuck pixels: read a fixed code whatever happens (shorted node); ``fraction`` of pixels,
     ``white_share`` of them stuck at the white level, the rest at a random code."""
     name, order = "stuck_pixels", 99
-    ranges = {"fraction": (5e-5, 5e-4), "white_share": (0.3, 1.0)}
+    ranges: ClassVar[dict] = {"fraction": (5e-5, 5e-4), "white_share": (0.3, 1.0)}
     log_params = ("fraction",)
 
     def setup(self, m, rng):
         H, W = m.spec.height, m.spec.width
-        n = max(1, int(round(self.fraction * H * W)))
+        n = max(1, round(self.fraction * H * W))
         self.idx = rng.choice(H * W, n, replace=False)
         white = rng.uniform(size=n) < self.white_share
         self.val = np.where(white, m.spec.white_dn, rng.integers(0, m.spec.white_dn, n)).astype(np.float32)
@@ -364,7 +365,7 @@ class AdcDNL(Effect):
     random per code) plus a ``major_dn`` error at every 64-code major carry (SAR capacitor mismatch),
     so codes have unequal widths (DNL_k = w_k - 1). Mid-tread ideal code k spans [k-0.5, k+0.5)."""
     name, order = "adc_dnl", 91
-    ranges = {"inl_dn": (0.1, 0.45), "major_dn": (0.0, 0.4)}
+    ranges: ClassVar[dict] = {"inl_dn": (0.1, 0.45), "major_dn": (0.0, 0.4)}
 
     def setup(self, m, rng):
         n = m.spec.white_dn + 1
@@ -389,12 +390,12 @@ class RTN(Effect):
     two levels ``amplitude_e`` apart (e-, log-normal spread 0.5 per pixel), state drawn each frame
     with probability ``p_high``."""
     name, order = "rtn", 55
-    ranges = {"fraction": (0.002, 0.02), "amplitude_e": (4.0, 30.0), "p_high": (0.2, 0.5)}
+    ranges: ClassVar[dict] = {"fraction": (0.002, 0.02), "amplitude_e": (4.0, 30.0), "p_high": (0.2, 0.5)}
     log_params = ("fraction", "amplitude_e")
 
     def setup(self, m, rng):
         H, W = m.spec.height, m.spec.width
-        n = max(1, int(round(self.fraction * H * W)))
+        n = max(1, round(self.fraction * H * W))
         self.idx = rng.choice(H * W, n, replace=False)
         self.amp = (self.amplitude_e * rng.lognormal(0, 0.5, n)).astype(np.float32)
 
@@ -409,7 +410,7 @@ class AmpGlow(Effect):
     ``rate_e_per_s`` (e-/s at the corner) decaying as exp(-d / ``length_frac`` * diagonal) with distance
     d from the corner; Poisson, exposure dependent."""
     name, order = "amp_glow", 21
-    ranges = {"rate_e_per_s": (5.0, 200.0), "length_frac": (0.1, 0.4)}
+    ranges: ClassVar[dict] = {"rate_e_per_s": (5.0, 200.0), "length_frac": (0.1, 0.4)}
     log_params = ("rate_e_per_s",)
 
     def setup(self, m, rng):
@@ -438,7 +439,7 @@ class ChargeCrosstalk(Effect):
     4 neighbours BEFORE read-out (after shot noise), so flats show lower temporal variance
     (by ~(1-4f)^2+4f^2) and neighbour-correlated shot noise, but read noise stays white."""
     name, order = "charge_crosstalk", 30
-    ranges = {"fraction": (0.01, 0.06)}
+    ranges: ClassVar[dict] = {"fraction": (0.01, 0.06)}
 
     def electrons(self, m, e, ctx):
         f = np.float32(self.fraction)
@@ -450,9 +451,9 @@ class UColumnTemporal(Effect):
     """Column-wise temporal noise: each column gets a fresh offset each frame (column ADC comparator
     noise), ``sigma_dn`` DN rms."""
     name, order = "undeclared_column_temporal", 71
-    ranges = {"sigma_dn": (0.3, 2.5)}
+    ranges: ClassVar[dict] = {"sigma_dn": (0.3, 2.5)}
     log_params = ("sigma_dn",)
-    family = {"time": "temporal", "support": "column", "mode": "additive", "exposure_dependent": False}
+    family: ClassVar[dict | None] = {"time": "temporal", "support": "column", "mode": "additive", "exposure_dependent": False}
 
     def analog_dn(self, m, v, ctx):
         return v + (ctx.rng.standard_normal((1, v.shape[1])) * self.sigma_dn).astype(np.float32)
@@ -462,8 +463,8 @@ class UGainDrift(Effect):
     """System gain drifts linearly over a sequence (amplifier warming): frame i of n has gain
     ``1 + drift_rel * (i/(n-1) - 0.5)``; ``drift_rel`` total relative change over the sequence."""
     name, order = "undeclared_gain_drift", 61
-    ranges = {"drift_rel": (0.005, 0.05)}
-    family = {"time": "temporal", "support": "frame", "mode": "multiplicative", "exposure_dependent": True}
+    ranges: ClassVar[dict] = {"drift_rel": (0.005, 0.05)}
+    family: ClassVar[dict | None] = {"time": "temporal", "support": "frame", "mode": "multiplicative", "exposure_dependent": True}
 
     def analog_gain(self, m, g, ctx):
         r = ctx.index / max(ctx.n_frames - 1, 1) - 0.5
@@ -474,8 +475,8 @@ class UBlackDrift(Effect):
     """Black level drifts with die temperature over a sequence: offset ``drift_dn * (i/(n-1) - 0.5)``
     DN (a ramp, total ``drift_dn``) plus an exposure term ``per_s_dn * t`` (self-heating)."""
     name, order = "undeclared_black_drift", 72
-    ranges = {"drift_dn": (0.5, 4.0), "per_s_dn": (0.0, 2.0)}
-    family = {"time": "temporal", "support": "frame", "mode": "additive", "exposure_dependent": True}
+    ranges: ClassVar[dict] = {"drift_dn": (0.5, 4.0), "per_s_dn": (0.0, 2.0)}
+    family: ClassVar[dict | None] = {"time": "temporal", "support": "frame", "mode": "additive", "exposure_dependent": True}
 
     def analog_dn(self, m, v, ctx):
         r = ctx.index / max(ctx.n_frames - 1, 1) - 0.5
@@ -486,8 +487,8 @@ class UInterleavedADC(Effect):
     """Interleaved column ADCs: columns in groups of 2 alternate between two converters (period 4
     columns, so not a CFA channel) with offset mismatch ``offset_dn`` and gain mismatch ``gain_rel``."""
     name, order = "undeclared_interleaved_adc", 73
-    ranges = {"offset_dn": (0.5, 4.0), "gain_rel": (0.002, 0.02)}
-    family = {"time": "fixed", "support": "column", "mode": "additive", "exposure_dependent": False}
+    ranges: ClassVar[dict] = {"offset_dn": (0.5, 4.0), "gain_rel": (0.002, 0.02)}
+    family: ClassVar[dict | None] = {"time": "fixed", "support": "column", "mode": "additive", "exposure_dependent": False}
 
     def analog_dn(self, m, v, ctx):
         W = v.shape[1]
@@ -499,9 +500,9 @@ class URow1f(Effect):
     """Row-correlated 1/f noise: per-frame row offsets whose spectrum along the row index falls as
     1/f^``alpha`` (flicker noise of the shared reference sampled row by row), ``sigma_e`` e- rms."""
     name, order = "undeclared_row_1f", 62
-    ranges = {"sigma_e": (0.5, 4.0), "alpha": (0.7, 1.5)}
+    ranges: ClassVar[dict] = {"sigma_e": (0.5, 4.0), "alpha": (0.7, 1.5)}
     log_params = ("sigma_e",)
-    family = {"time": "temporal", "support": "row", "mode": "additive", "exposure_dependent": False}
+    family: ClassVar[dict | None] = {"time": "temporal", "support": "row", "mode": "additive", "exposure_dependent": False}
 
     def read_e(self, m, e, ctx):
         H = e.shape[0]
@@ -518,8 +519,8 @@ class UPixelNonlinearity(Effect):
     """Pixel-dependent non-linearity: each pixel's response is ``e * (1 - c_p * e / FW)`` with
     ``c_p = |N(0, sigma)|`` fixed per pixel (floating-diffusion capacitance spread)."""
     name, order = "undeclared_pixel_nonlinearity", 41
-    ranges = {"sigma": (0.01, 0.08)}
-    family = {"time": "fixed", "support": "pixel", "mode": "multiplicative", "exposure_dependent": True}
+    ranges: ClassVar[dict] = {"sigma": (0.01, 0.08)}
+    family: ClassVar[dict | None] = {"time": "fixed", "support": "pixel", "mode": "multiplicative", "exposure_dependent": True}
 
     def setup(self, m, rng):
         self.c = np.abs(rng.standard_normal((m.spec.height, m.spec.width)) * self.sigma).astype(np.float32)
@@ -533,9 +534,9 @@ class USmear(Effect):
     ``fraction`` x its column's mean photo-charge during transfer (shot-noise sampled); exposure-time
     independent at fixed signal, proportional to the collected light."""
     name, order = "undeclared_smear", 31
-    ranges = {"fraction": (0.002, 0.02)}
+    ranges: ClassVar[dict] = {"fraction": (0.002, 0.02)}
     log_params = ("fraction",)
-    family = {"time": "fixed", "support": "column", "mode": "additive", "exposure_dependent": True}
+    family: ClassVar[dict | None] = {"time": "fixed", "support": "column", "mode": "additive", "exposure_dependent": True}
 
     def mean_signal(self, m, mu, ctx):
         return mu + np.float32(self.fraction) * mu.mean(axis=0, keepdims=True)

@@ -223,7 +223,7 @@ def test_row_noise_and_column_fpn_magnitudes():
 
 
 def test_quantization_codes_are_steps():
-    _, m, f = _one({"quantization": {"step_dn": 8}}, n=2)
+    _, _m, f = _one({"quantization": {"step_dn": 8}}, n=2)
     assert np.all(f % 8 == 0)
 
 
@@ -269,7 +269,7 @@ def test_hot_pixels_count_and_level():
 
 def test_spatial_correlation_adjacent_correlation():
     c = 0.06
-    sp, m, f = _one({"spatial_correlation": {"coupling": c}}, n=8, width=128, height=128)
+    _sp, _m, f = _one({"spatial_correlation": {"coupling": c}}, n=8, width=128, height=128)
     d = f - f.mean(0)
     r = np.mean(d[:, :, 1:] * d[:, :, :-1]) / np.mean(d * d)
     expect = 2 * c * (1 - 4 * c) / ((1 - 4 * c) ** 2 + 4 * c ** 2)
@@ -296,10 +296,10 @@ def test_adc_dnl_code_occupancy_follows_code_widths():
 
 
 def test_undeclared_gain_drift_and_interleaved_adc():
-    sp, m, f = _one({"undeclared_gain_drift": {"drift_rel": 0.04}}, kind="flat", t=0.01, level=0.5, n=8)
+    sp, _m, f = _one({"undeclared_gain_drift": {"drift_rel": 0.04}}, kind="flat", t=0.01, level=0.5, n=8)
     sig = f.mean((1, 2)) - sp.black_dn
     assert sig[-1] / sig[0] == pytest.approx(1.02 / 0.98, rel=0.003)
-    sp, m, f = _one({"undeclared_interleaved_adc": {"offset_dn": 3.0, "gain_rel": 0.0}}, n=8)
+    sp, _m, f = _one({"undeclared_interleaved_adc": {"offset_dn": 3.0, "gain_rel": 0.0}}, n=8)
     cols = f.mean((0, 1))
     a, b = cols[(np.arange(sp.width) // 2) % 2 == 0].mean(), cols[(np.arange(sp.width) // 2) % 2 == 1].mean()
     assert a - b == pytest.approx(3.0, abs=0.2)
@@ -321,7 +321,7 @@ def test_monochrome_dng_round_trip_rawpy(tmp_path):
 
 def test_heavy_tail_read_kurtosis():
     nu = 10.0
-    sp, m, f = _one({"heavy_tail_read": {"nu": nu}}, iso=800, n=8, read_noise_e=3.0)
+    sp, _m, f = _one({"heavy_tail_read": {"nu": nu}}, iso=800, n=8, read_noise_e=3.0)
     K = sp.gain(800)
     d = (f - f.mean(0)).ravel() * np.sqrt(8 / 7)
     var_r = (K * sp.read_noise_e) ** 2
@@ -334,3 +334,16 @@ def test_heavy_tail_read_kurtosis():
     ex = np.mean(d ** 4) / np.mean(d ** 2) ** 2 - 3
     expect = 6 / (nu - 4) * (var_r / var) ** 2 * np.sum(a ** 4) / np.sum(a ** 2) ** 2
     assert ex == pytest.approx(expect, abs=0.25)  # ~4 standard errors of a heavy-tailed kurtosis at 74k samples
+
+
+def test_flat_given_in_photons_uses_the_qe(tmp_path):
+    spec = {"sensor": {"width": 32, "height": 32, "qe": 0.5, "bits": 16, "black_dn": 1024.0}, "isos": [100],
+            "darks": None, "scene": None, "fmt": "npy",
+            "flats": {"exposure_s": 0.1, "photons_per_s": [40000.0], "frames": 4}}
+    truth = write_capture_set(tmp_path, spec, seed=10)
+    f = np.stack([np.load(p) for p in sorted((tmp_path / "flat_iso100_p40000").glob("*.npy"))]).astype(float)
+    K = truth["sensor"]["gain_dn_per_e"]["100"]
+    mu_e = 40000.0 * 0.5 * 0.1
+    se = K * np.sqrt(mu_e) / np.sqrt(f.size)
+    assert f.mean() - 1024.0 == pytest.approx(K * mu_e, abs=6 * se + 0.5)
+    assert truth["sequences"][0]["photons_per_pixel"] == pytest.approx(4000.0)
