@@ -31,8 +31,8 @@ sys.path.insert(0, str(REPO))  # this checkout's simcam, not an installed one
 
 from scipy import ndimage, optimize  # noqa: E402
 
-from simcam.dataset.groundtruth import Burst, GroundTruthConfig, SyntheticBurst, estimate_ground_truth  # noqa: E402
-from simcam.dataset.groundtruth.robust_mean import wls_cdf_fit, wls_objective  # noqa: E402
+from simcam.groundtruth import Burst, GroundTruthConfig, SyntheticBurst, estimate_ground_truth  # noqa: E402
+from simcam.groundtruth.robust_mean import wls_cdf_fit, wls_objective  # noqa: E402
 
 WHITE = 4095.0
 

@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's simcam
-from simcam.dataset.groundtruth import Burst, GroundTruthConfig, SyntheticBurst, estimate_ground_truth  # noqa: E402
-from simcam.dataset.groundtruth.alignment import dense_field, local_shifts, prepare_reference, reject_outliers  # noqa: E402
+from simcam.groundtruth import Burst, GroundTruthConfig, SyntheticBurst, estimate_ground_truth  # noqa: E402
+from simcam.groundtruth.alignment import dense_field, local_shifts, prepare_reference, reject_outliers  # noqa: E402
 
 
 def psnr(mse: float) -> float:

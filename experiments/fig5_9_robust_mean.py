@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's simcam, not an installed one
-from simcam.dataset.groundtruth import SyntheticBurst, censored_mle, plain_mean, wls_cdf_fit
+from simcam.groundtruth import SyntheticBurst, censored_mle, plain_mean, wls_cdf_fit
 
 METHODS = ("wls", "wls_exact", "mle", "mean", "oracle")
 

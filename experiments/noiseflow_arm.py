@@ -1,7 +1,7 @@
 """Noise Flow arm of ``table63_cpu.py``: a flow trained (briefly, on CPU) on the real training pairs.
 
 Uses :mod:`simcam.noise.flow` (the project's own Noise Flow; never the published
-weights). Returns a noise sampler for :class:`simcam.dataset.torchdata.NoisyPatchDataset`.
+weights). Returns a noise sampler for :class:`simcam.training.patches.NoisyPatchDataset`.
 """
 
 from __future__ import annotations

@@ -85,8 +85,8 @@ def capture(sensor, spec, scene: np.ndarray, n_noisy: int, n_gt: int, rng) -> tu
 def train_arm(name, dataset, args, log):
     import torch
 
-    from simcam.dataset.dncnn import build_dncnn, save_checkpoint, train_dncnn
-    from simcam.dataset.torchdata import make_loader
+    from simcam.denoise.dncnn import build_dncnn, save_checkpoint, train_dncnn
+    from simcam.training.patches import make_loader
 
     torch.manual_seed(0)
     model = build_dncnn(depth=args.depth, width=args.width)
@@ -127,11 +127,11 @@ def main() -> None:
     torch.set_num_threads(2)
     from loop_generator import HiddenEffectSensor, SensorSpec
 
-    from simcam.dataset.benchmark import run_benchmark
-    from simcam.dataset.noise_estimation import estimate_nlf, estimate_sigma
-    from simcam.dataset.noise_samplers import GaussianNoise, NLFNoise
-    from simcam.dataset.torchdata import NoisyPatchDataset, PairPatchDataset
-    from simcam.dataset.dncnn import DnCNNDenoiser
+    from simcam.denoise.benchmark import run_benchmark
+    from simcam.denoise.noise_estimation import estimate_nlf, estimate_sigma
+    from simcam.training.samplers import GaussianNoise, NLFNoise
+    from simcam.training.patches import NoisyPatchDataset, PairPatchDataset
+    from simcam.denoise.dncnn import DnCNNDenoiser
 
     rng = np.random.default_rng(2024)
     spec = SensorSpec(**SENSOR)
@@ -176,7 +176,7 @@ def main() -> None:
     for arm, ds in arms.items():
         ck = out / f"dncnn_{arm}.pt"
         if args.reuse and ck.exists() and (out / "train_info.json").exists():
-            from simcam.dataset.dncnn import load_checkpoint
+            from simcam.denoise.dncnn import load_checkpoint
 
             models[arm] = load_checkpoint(ck)
             train_info[arm] = json.loads((out / "train_info.json").read_text())[arm]

@@ -25,7 +25,7 @@ def bench(
     leaderboard: Optional[Path] = typer.Option(None, "--leaderboard", help="Add the result to a Markdown leaderboard file."),
 ) -> None:
     """Denoise SIDD-format blocks and report PSNR/SSIM (raw, sRGB) and seconds per megapixel."""
-    from ..dataset.benchmark import load_metadata_dir, pipeline_renderer, run_benchmark
+    from ..denoise.benchmark import load_metadata_dir, pipeline_renderer, run_benchmark
     from ..errors import DatasetError
     from ..io.sidd_blocks import read_blocks, read_pair_folder
 
@@ -64,7 +64,7 @@ def bench(
     if csv_out:
         result.write_csv(csv_out)
     if leaderboard:
-        from ..dataset.benchmark import update_leaderboard
+        from ..denoise.benchmark import update_leaderboard
 
         update_leaderboard(leaderboard, result)
 

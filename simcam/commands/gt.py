@@ -47,7 +47,7 @@ def gt(
     """Estimate the noise-free image of a burst: defects, intensity and dense alignment, robust mean."""
     import json
 
-    from ..dataset.groundtruth import Burst, GroundTruthConfig, estimate_ground_truth, load_defect_map, save_defect_map
+    from ..groundtruth import Burst, GroundTruthConfig, estimate_ground_truth, load_defect_map, save_defect_map
     from ..errors import DatasetError
 
     npz, dng = _outputs(output)
@@ -68,12 +68,12 @@ def gt(
         res.save_npz(npz)
         written.append(str(npz))
     if dng is not None:
-        from ..dataset.groundtruth.dngout import write_ground_truth_dng
+        from ..groundtruth.dngout import write_ground_truth_dng
 
         write_ground_truth_dng(dng, res, burst)
         written.append(str(dng))
     if save_defects is not None:
-        from ..dataset.groundtruth import DefectMap
+        from ..groundtruth import DefectMap
 
         save_defect_map(save_defects, DefectMap(res.defects, "simcam gt", res.report["defects"].get("planes", [])))
         written.append(str(save_defects))

@@ -24,8 +24,8 @@ def synth_cmd(
     """Write OUT/clean.dng and OUT/frame_000.dng ... with noise from PROFILE at ISO."""
     from tqdm import tqdm
 
-    from ..noise.synth import load_clean, synth
-    from ..profiles import load_profile
+    from ..synth import load_clean, synth
+    from ..profiles.schema import load_profile
     from ..stages.noise import Noise
 
     prof = load_profile(profile)

@@ -9,7 +9,7 @@ tail) from counter-based SplitMix64 words, and writes the clipped noisy value:
 no temporaries, one read and one write per pixel (:func:`nlf_noise`; about 3.7x
 faster than numpy's ``standard_normal`` alone for a 4 x 256 x 256 patch).
 :func:`nlf_noise_packed` also packs the 2 x 2 Bayer crop into its four planes in
-the same pass (training data: ``simcam.dataset.noise_samplers``).
+the same pass (training data: ``simcam.training.samplers``).
 
 Randomness: element ``i`` takes the word at counter ``seed0 + (i + 1) gamma``
 for its first ziggurat try (the words of a pass are generated together, which

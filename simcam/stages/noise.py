@@ -56,7 +56,7 @@ class Noise(Stage):
     def _build_model(self):
         from ..noise.base import model_from_entry
         from ..noise.composite import Composite
-        from ..profiles import load_profile
+        from ..profiles.schema import load_profile
 
         p = self.params
         if p.profile is not None:
@@ -94,7 +94,7 @@ class Noise(Stage):
         noisy = np.asarray(drawn["noisy"], dtype=np.float32)
         if noisy.shape != frame.data.shape:
             raise StageError(f"stage 'noise': drawn noise has shape {noisy.shape}, the frame {frame.data.shape}")
-        from ..noise.importers import model_noise_profile
+        from ..profiles.importers import model_noise_profile
 
         meta = frame.meta
         nlf = model_noise_profile(self.model, meta.cfa)

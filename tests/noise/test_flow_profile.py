@@ -47,7 +47,7 @@ def test_profile_yaml_and_pipeline_noise_stage():
     """profiles/noiseflow-sidd-gp.yaml -> noise stage -> variance of the NLF at that ISO."""
     from simcam.frame import CameraMeta, RawFrame
     from simcam.pipeline import Pipeline
-    from simcam.profiles import load_profile
+    from simcam.profiles.schema import load_profile
 
     prof = load_profile(PROFILES / "noiseflow-sidd-gp.yaml")
     assert prof.model_for(566.0, "GP").type == "noiseflow_onnx"
