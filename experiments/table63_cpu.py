@@ -48,10 +48,10 @@ SENSOR = dict(height=SIZE, width=SIZE, bits=10, K=1.5, read_dn=2.0, black_dn=64.
 def binned_mosaic(path: Path, b: int = 4) -> np.ndarray:
     """Normalised raw of a DNG, binned b x b within each CFA plane (less noise, more content per crop)."""
     from simcam.cfa import pack, unpack
-    from simcam.io.dng import read_dng
-    from simcam.stages.raw import Crop, Normalize
+    from simcam.io.normalized import read_normalized
+    from simcam.stages.raw import Crop
 
-    frame = Crop()(Normalize()(read_dng(path)))
+    frame = Crop()(read_normalized(path))
     p = pack(frame.data[: frame.height // (2 * b) * 2 * b, : frame.width // (2 * b) * 2 * b])
     c, h, w = p.shape
     return unpack(p.reshape(c, h // b, b, w // b, b).mean(axis=(2, 4)).astype(np.float32))

@@ -46,11 +46,9 @@ def load_clean(path: str | Path, *, as_: str = "raw", profile=None, camera: str 
     if not path.exists():
         raise ImageIOError(f"{path}: no such file")
     if path.suffix.lower() == ".dng":
-        from .io.dng import read_dng
-        from .stages.raw import Normalize
+        from .io.normalized import read_normalized
 
-        frame = read_dng(path)
-        out = Normalize()(frame)
+        out = read_normalized(path)
         if iso is not None:
             out = out.evolve(meta=out.meta.replace(iso=float(iso)))
         return out
@@ -131,7 +129,7 @@ def synth(clean: RawFrame, out_dir: str | Path, *, stage, frames: int, seed: int
           progress: Callable[[Iterable], Iterable] | None = None, protect: tuple = ()) -> list[Path]:
     """Write ``clean.dng`` and ``frames`` noisy DNGs into ``out_dir`` (see module docstring)."""
     from .io.dng_write import write_dng
-    from .profiles.importers import model_noise_profile
+    from .noise.noise_profile import model_noise_profile
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -128,12 +128,13 @@ class Burst:
             from ..io.dng import read_dng
         except ImportError:  # pragma: no cover - until the DNG reader lands
             raise DatasetError(f"{files[0]}: reading DNG bursts needs simcam.io.dng (not available)") from None
-        from ..stages.raw import Normalize, black_level_map
+        from ..raw import black_level_map, normalize
 
-        norm = Normalize(Normalize.Params(black_level=black_level, white_level=white_level))
+        levels = {"black_level": None if black_level is None else float(black_level),
+                  "white_level": None if white_level is None else float(white_level)}
 
         def load(p):
-            return norm.apply(read_dng(p))
+            return normalize(read_dng(p), **levels)
 
         first = read_dng(files[0])
         meta = first.meta
@@ -176,9 +177,9 @@ class Burst:
         name = self.names[i]
         if isinstance(obj, RawFrame):
             if obj.kind == "raw_dn":
-                from ..stages.raw import Normalize
+                from ..raw import normalize
 
-                obj = Normalize().apply(obj)
+                obj = normalize(obj)
             if obj.kind != "raw":
                 raise DatasetError(f"{name}: kind: {obj.kind!r}, expected a raw mosaic")
             st = FrameSettings(tuple(obj.data.shape), obj.meta.cfa, obj.meta.iso, obj.meta.exposure_time_s)

@@ -240,13 +240,8 @@ def register_model(cls: type[NoiseModel]) -> type[NoiseModel]:
 
 
 def model_types() -> dict[str, type[NoiseModel]]:
-    """All registered model classes by ``type`` name."""
-    _load_builtin()
+    """All registered model classes by ``type`` name (:mod:`simcam.noise` registers the built-in ones)."""
     return dict(_MODELS)
-
-
-def _load_builtin() -> None:
-    from . import clipping, composite, gaussian, nlf, onnx_sampler, poisson_gaussian, poisson_mixture  # noqa: F401
 
 
 def from_registry(entry: Any, registry: dict[str, type], *, base: type, noun: str, expected: list[str],
@@ -269,7 +264,6 @@ def from_registry(entry: Any, registry: dict[str, type], *, base: type, noun: st
 
 def model_from_entry(entry: Any, *, where: str = "model") -> NoiseModel:
     """Build a model from its profile entry ``{type: ..., **params}`` or raise NoiseModelError."""
-    _load_builtin()
     return from_registry(entry, _MODELS, base=NoiseModel, noun="noise model", expected=sorted(_MODELS), where=where)
 
 

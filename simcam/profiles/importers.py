@@ -35,6 +35,7 @@ import numpy as np
 
 from ..cfa import PACK_OFFSETS, check_pattern
 from ..errors import ProfileError
+from ..noise.noise_profile import noise_profile_site_values
 from .schema import CalibrationProfile, profile_from_dict
 
 
@@ -123,20 +124,6 @@ def import_darktable(path: str | Path, camera: str, *, cfa: str = "RGGB", camera
     }, source=str(path))
 
 
-def noise_profile_site_values(pairs: np.ndarray, cfa: str | None, *, where: str = "NoiseProfile"):
-    """(beta1, beta2) per site (float or 4 floats) from DNG NoiseProfile pairs."""
-    pairs = np.asarray(pairs, dtype=np.float64).reshape(-1, 2)
-    if pairs.shape[0] == 1:
-        return float(pairs[0, 0]), float(pairs[0, 1])
-    if pairs.shape[0] == 3:
-        if cfa is None:
-            raise ProfileError(f"{where}: 3 per-plane pairs need the CFA pattern to map them to sites")
-        b1 = [float(pairs["RGB".index(c), 0]) for c in cfa]
-        b2 = [float(pairs["RGB".index(c), 1]) for c in cfa]
-        return b1, b2
-    raise ProfileError(f"{where}: {pairs.shape[0]} (S, O) pairs; expected 1 or 3 (one per CFA plane)")
-
-
 def profile_from_dng(path: str | Path, *, camera_id: str | None = None) -> CalibrationProfile:
     """One-entry profile from a DNG's NoiseProfile tag and ISO."""
     from ..io.dng import read_dng_meta
@@ -157,22 +144,3 @@ def profile_from_dng(path: str | Path, *, camera_id: str | None = None) -> Calib
                      "black_level_dn": float(np.mean(meta.black_level)), "white_level_dn": float(meta.white_level),
                      "entries": [{"iso": float(meta.iso), "model": {"type": "nlf", "beta1": b1, "beta2": b2}}]}],
     }, source=str(path))
-
-
-def model_noise_profile(model, cfa: str | None) -> np.ndarray | None:
-    """DNG NoiseProfile pairs for a model with ``var = beta1 x + beta2`` (1 pair, or 3 per R, G, B plane).
-
-    Per-site values become per-colour planes (the two green sites averaged);
-    None for a model without that form.
-    """
-    from ..stages.noise import nlf_pairs
-
-    pairs = nlf_pairs(model)
-    if pairs is None or pairs.shape[0] == 1 or cfa is None:
-        return None if pairs is None else pairs[:1] if pairs.shape[0] == 1 else pairs.mean(axis=0, keepdims=True)
-    cfa = check_pattern(cfa)
-    out = np.zeros((3, 2))
-    for c in range(3):
-        sites = [i for i, (_, letter) in enumerate(zip(PACK_OFFSETS, cfa)) if letter == "RGB"[c]]
-        out[c] = pairs[sites].mean(axis=0)
-    return out

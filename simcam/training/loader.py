@@ -25,6 +25,29 @@ from ..errors import DatasetError, require_extra
 torch = require_extra("torch", "torch")
 
 
+class PatchBatch(list):
+    """The samples of one batch (a plain list of sample dicts, so ``default_collate`` works on it)
+    with the batch already stacked: :func:`collate_patches` returns that without copying."""
+
+    collated: dict | None = None
+
+    def stacked(self, noisy, clean, metas) -> "PatchBatch":
+        from torch.utils.data import default_collate
+
+        self.collated = {"noisy": noisy, "clean": clean, "meta": default_collate(metas)}
+        return self
+
+
+def collate_patches(batch):
+    """``default_collate``, except for a :class:`PatchBatch` whose stacked tensors are returned as they are."""
+    if isinstance(batch, PatchBatch) and batch.collated is not None:
+        return batch.collated
+    from torch.utils.data import default_collate
+
+    return default_collate(batch)
+
+
+
 class ThreadLoader:
     """Iterable of collated batches of a map-style ``dataset`` made by ``num_workers`` threads.
 
@@ -42,7 +65,7 @@ class ThreadLoader:
         The shuffling sampler's generator: as ``DataLoader`` does, each epoch first draws one
         int64 from it (the DataLoader's base seed), so both shuffle alike.
     collate_fn : callable
-        Batch collation (``simcam.training.patches.collate_patches`` by default).
+        Batch collation (:func:`collate_patches` by default).
     drop_last : bool
         Drop a last incomplete batch.
     prefetch : int
@@ -58,7 +81,7 @@ class ThreadLoader:
             raise DatasetError(f"thread workers: num_workers={num_workers}, batch_size={batch_size}, "
                                f"prefetch={prefetch}; expected each >= 1")
         if collate_fn is None:
-            from .patches import collate_patches as collate_fn
+            collate_fn = collate_patches
         self.dataset, self.collate_fn = dataset, collate_fn
         self.sampler = sampler if sampler is not None else range(len(dataset))
         self.batch_sampler = torch.utils.data.BatchSampler(self.sampler, batch_size, drop_last)

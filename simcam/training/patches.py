@@ -29,6 +29,7 @@ import numpy as np
 from ..cfa import PACK_OFFSETS, check_pattern, pack, shift_pattern
 from ..errors import DatasetError, require_extra
 from ..frame import RawFrame
+from .loader import PatchBatch, ThreadLoader, collate_patches
 from .unprocess import Unprocess
 
 torch = require_extra("torch", "torch")
@@ -58,11 +59,9 @@ class Source:
         if suffix == ".npy":
             arr = np.load(p, allow_pickle=False)
         elif suffix == ".dng":
-            from ..io.dng import read_dng  # type: ignore[attr-defined]
-            from ..stages.raw import Normalize
+            from ..io.normalized import read_normalized
 
-            frame = read_dng(p)
-            frame = Normalize()(frame)
+            frame = read_normalized(p)
             return Source(frame.data.astype(np.float32), p, "raw", frame.meta.cfa)
         elif suffix in (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr"):
             from ..io.images import read_image
@@ -227,28 +226,6 @@ def _batch_tensor(n: int, p: int):
     proto = torch.empty(0, dtype=torch.float32)
     storage = proto._typed_storage()._new_shared(n * 4 * p * p)
     return proto.new(storage).resize_(n, 4, p, p)
-
-
-class PatchBatch(list):
-    """The samples of one batch (a plain list of sample dicts, so ``default_collate`` works on it)
-    with the batch already stacked: :func:`collate_patches` returns that without copying."""
-
-    collated: dict | None = None
-
-    def stacked(self, noisy, clean, metas) -> "PatchBatch":
-        from torch.utils.data import default_collate
-
-        self.collated = {"noisy": noisy, "clean": clean, "meta": default_collate(metas)}
-        return self
-
-
-def collate_patches(batch):
-    """``default_collate``, except for a :class:`PatchBatch` whose stacked tensors are returned as they are."""
-    if isinstance(batch, PatchBatch) and batch.collated is not None:
-        return batch.collated
-    from torch.utils.data import default_collate
-
-    return default_collate(batch)
 
 
 # ------------------------------------------------------------------------------- datasets
@@ -423,8 +400,6 @@ def make_loader(dataset, *, batch_size: int, num_workers: int = 0, shuffle: bool
         gen = torch.Generator()
         gen.manual_seed(int(generator_seed) + int(getattr(dataset, "epoch", 0)))
     if workers == "thread" and num_workers > 0:
-        from .loader import ThreadLoader
-
         extra = sorted(set(kwargs) - {"collate_fn", "drop_last"})
         if extra:
             raise DatasetError(f"make_loader: workers='thread' does not take {', '.join(extra)}")

@@ -272,10 +272,10 @@ def load_dng_bursts(root, *, patches_per_image: int = 64, size: int = 32, seed: 
     EXIF tags, camera from ``UniqueCameraModel`` (else Make Model).
     """
     from ...io.dng import read_dng
-    from ...stages.raw import Normalize
+    from ...io.normalized import read_normalized
+    from ...raw import normalize
 
     root = Path(root)
-    norm = Normalize()
     dirs = sorted({p.parent for p in root.rglob("*.dng")} | ({root} if any(root.glob("*.dng")) else set()))
     parts = {k: [] for k in KEYS}
     for d_i, d in enumerate(dirs):
@@ -283,7 +283,7 @@ def load_dng_bursts(root, *, patches_per_image: int = 64, size: int = 32, seed: 
         if not frames:
             continue
         if (d / "clean.dng").is_file():
-            gt = norm.apply(read_dng(d / "clean.dng")).data
+            gt = read_normalized(d / "clean.dng").data
         elif (d / "gt.npz").is_file():
             with np.load(d / "gt.npz") as z:
                 if "gt" not in z:
@@ -295,7 +295,7 @@ def load_dng_bursts(root, *, patches_per_image: int = 64, size: int = 32, seed: 
             frame = read_dng(f)
             if frame.meta.iso is None:
                 raise DatasetError(f"{f}: ISO: missing from the tags; expected the capture's ISO")
-            noisy = norm.apply(frame).data
+            noisy = normalize(frame).data
             if noisy.shape != gt.shape:
                 raise DatasetError(f"{f}: shape {noisy.shape} differs from its ground truth {gt.shape}")
             camera = frame.meta.unique_camera_model or f"{frame.meta.make} {frame.meta.model}".strip()
