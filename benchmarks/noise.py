@@ -104,7 +104,8 @@ def run(h: int, w: int, seed: int = 0, with_torch: bool = True) -> list[tuple[st
         t_np = _time(lambda: rng.poisson(lam))
         t_pg = _time(lambda: pg.sample(clean, cond, rng))
         rows.append((f"numpy poisson, lambda = clean/beta1 (ISO {iso}, max {1 / b1:.0f})", mp / t_np, "1.00x (baseline)"))
-        rows.append((f"simcam poisson_gaussian exact (ISO {iso})", mp / t_pg, f"{t_np / t_pg:.2f}x faster than numpy poisson (one thread)"))
+        rows.append((f"simcam poisson_gaussian exact (ISO {iso})", mp / t_pg,
+                     f"{t_np / t_pg:.2f}x faster than numpy poisson (one thread)"))
     # wall clock with row blocks on a thread pool (same bytes as one thread)
     n = os.cpu_count() or 1
     pg = model_from_entry({"type": "poisson_gaussian", "beta1": 1.764e-3, "beta2": 1.2e-5})

@@ -10,7 +10,6 @@ import numpy as np
 
 
 def noise_flow_sampler(train_pairs, *, log=print, out=None, epochs: int = 2, patches: int = 1000, seed: int = 0):
-    import torch
 
     from simcam.cfa import pack
     from simcam.noise.flow.model import NoiseFlow

@@ -161,7 +161,8 @@ def main() -> None:
             arms[arm] = NoisyPatchDataset(clean_train, GaussianNoise(sigma=(min(sigmas), max(sigmas)), normals=NORMALS),
                                           length=n, patch_size=args.patch, seed=1)
         elif arm == "nlf":
-            arms[arm] = NoisyPatchDataset(clean_train, NLFNoise(nlfs=nlfs, normals=NORMALS), length=n, patch_size=args.patch, seed=1)
+            arms[arm] = NoisyPatchDataset(clean_train, NLFNoise(nlfs=nlfs, normals=NORMALS), length=n,
+                                          patch_size=args.patch, seed=1)
         elif arm == "real":
             arms[arm] = PairPatchDataset(train, length=n, patch_size=args.patch, seed=1)
         elif arm == "noiseflow":

@@ -1,6 +1,7 @@
 """Print sha256 of a fixed set of CLI outputs, to check that a refactoring changes no bytes.
 
-Usage: ``python scripts/layout_hashes.py [OUTDIR]``. Runs ``simcam render`` on the bundled chart (PNG,
+Usage: ``python scripts/layout_hashes.py [OUTDIR]`` (use the same OUTDIR for both runs: the ground-truth
+report names its input files). Runs ``simcam render`` on the bundled chart (PNG,
 16-bit TIFF, linear EXR) and on each DNG in ``../shared/data/dng`` (when present), ``simcam synth`` on
 the chart with a profile and a fixed seed, and ``simcam gt`` on a small burst made by ``simcam synth``.
 """
@@ -10,6 +11,8 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import io
+import json
+import os
 import sys
 import tempfile
 from pathlib import Path
@@ -17,10 +20,29 @@ from pathlib import Path
 from simcam.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED_DNG = ROOT.parent / "shared" / "data" / "dng"
+SHARED_DNG = Path(os.environ.get("SIMCAM_SHARED_DATA", ROOT.parent / "shared" / "data")) / "dng"
 
 
 def _sha(path: Path) -> str:
+    """sha256 of the file's bytes; of its pixels for TIFF/EXR (their DateTime tag changes every run);
+    of its JSON without ``timing_s`` for a report (wall-clock timings)."""
+    if path.suffix in (".tif", ".exr"):
+        import numpy as np
+        import OpenImageIO as oiio
+        import tifffile
+
+        if path.suffix == ".tif":
+            pixels = tifffile.imread(path)
+        else:  # float32 holds every half value exactly
+            inp = oiio.ImageInput.open(str(path))
+            pixels = inp.read_image()
+            inp.close()
+        pixels = np.ascontiguousarray(pixels)
+        return "pixels " + hashlib.sha256(f"{pixels.shape} {pixels.dtype}".encode() + pixels.tobytes()).hexdigest()
+    if path.suffix == ".json":
+        doc = json.loads(path.read_text())
+        doc.pop("timing_s", None)
+        return "json-no-timing " + hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 

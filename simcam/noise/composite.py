@@ -217,7 +217,8 @@ class Composite(NoiseModel):
         y = check_same_shape(noisy, clean).astype(np.float32).astype(np.float64)
         bad = [e.type for e in self.effects if e.role() is None]
         if bad:
-            raise NoiseModelError(f"model 'composite': log_prob is not tractable with effect(s) {bad} (random per frame or discretising)")
+            raise NoiseModelError(f"model 'composite': log_prob is not tractable with effect(s) {bad} "
+                                  "(random per frame or discretising)")
         fixed = self.fixed_patterns(clean.shape)
         signal = clean.copy()
         for i, e in enumerate(self.effects):

@@ -87,7 +87,8 @@ def variance_vs_intensity(noisy, clean, *, cfa: str | None = "RGGB", bins: int |
     noisy = np.asarray(noisy, dtype=np.float64)
     clean = np.asarray(clean, dtype=np.float64)
     if noisy.shape != clean.shape or noisy.ndim != 2:
-        raise NoiseModelError(f"variance_vs_intensity: expected two H x W arrays of one shape, got {noisy.shape} and {clean.shape}")
+        raise NoiseModelError(
+            f"variance_vs_intensity: expected two H x W arrays of one shape, got {noisy.shape} and {clean.shape}")
     if cfa is not None:
         cfa = check_pattern(cfa)
     edges = np.linspace(*value_range, bins + 1) if np.isscalar(bins) else np.asarray(bins, dtype=np.float64)

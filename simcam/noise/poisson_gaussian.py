@@ -141,7 +141,8 @@ class PoissonGaussian(PoissonScaleModel):
         b1 = np.broadcast_to(b1, clean.shape).astype(np.float64).ravel()
         b2 = np.broadcast_to(b2, clean.shape).astype(np.float64).ravel()
         if (b2 <= 0).any():
-            raise NoiseModelError(f"{cond.source or 'model'}: poisson_gaussian: log_prob needs beta2 > 0 (a density), got {self.beta2!r}")
+            raise NoiseModelError(
+                f"{cond.source or 'model'}: poisson_gaussian: log_prob needs beta2 > 0 (a density), got {self.beta2!r}")
         return clean.astype(np.float64).ravel() / b1, b1, b2
 
     def log_prob(self, noisy, clean, cond):

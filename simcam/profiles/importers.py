@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cfa import PACK_OFFSETS, check_pattern
+from ..cfa import check_pattern
 from ..errors import ProfileError
 from ..noise.noise_profile import noise_profile_site_values
 from .schema import CalibrationProfile, profile_from_dict
@@ -110,7 +110,8 @@ def import_darktable(path: str | Path, camera: str, *, cfa: str = "RGGB", camera
     return profile_from_dict({
         "schema_version": 1,
         "provenance": {
-            "source": f"{path.name} (darktable noise profiles, version {doc.get('version')}), camera {mk.get('maker')} {mo.get('model')}",
+            "source": (f"{path.name} (darktable noise profiles, version {doc.get('version')}), "
+                       f"camera {mk.get('maker')} {mo.get('model')}"),
             "method": "darktable Poisson-Gaussian fit var = a x + b per RGB on raw scaled to [0, 1], white balance "
                       "pass-through ('raw linear' style; = simcam normalised raw): beta1 = a, beta2 = b. darktable "
                       "fits after demosaicking: per-site raw variance of interpolated sites may be higher",

@@ -13,7 +13,7 @@ from typing import Literal, Optional
 import numpy as np
 
 from ..cfa import shift_pattern
-from ..errors import MetadataError, StageError
+from ..errors import StageError
 from ..frame import MOSAIC_KINDS, SIGNAL_KINDS, RawFrame
 from ..raw import normalize
 from .base import Stage, StageParams, register_stage

@@ -150,7 +150,8 @@ def test_marginal_kl_and_nll():
     m = model_from_entry({"type": "gaussian", "sigma": 0.01})
     clean = np.zeros((200, 500), np.float32)
     noisy = m.sample(clean, NoiseCondition(), np.random.default_rng(1))
-    assert nll_per_dim(m, noisy, clean, NoiseCondition()) == pytest.approx(0.5 * np.log(2 * np.pi * np.e * 1e-4), abs=5 * np.sqrt(0.5 / noisy.size))
+    assert nll_per_dim(m, noisy, clean, NoiseCondition()) == pytest.approx(0.5 * np.log(2 * np.pi * np.e * 1e-4),
+                                                                           abs=5 * np.sqrt(0.5 / noisy.size))
 
 
 def test_variance_curve_recovers_nlf():
