@@ -108,10 +108,10 @@ def main() -> None:
              ("nlf profile sidd-gp", ProfileNoise(str(ROOT / "profiles" / "sidd-gp.yaml"), isos=[100.0, 400.0, 800.0, 1600.0]))]
     flow_note = None
     if args.flow and Path(args.flow).exists():
-        from simcam.training.samplers import OnnxFlowNoise
+        from simcam.training.samplers import FlowNoise
 
         cam = int(args.flow_camera) if args.flow_camera.isdigit() else args.flow_camera
-        cases.append(("noise-flow (onnx)", OnnxFlowNoise(args.flow, conds=[(float(args.flow_iso), cam)])))
+        cases.append(("noise-flow (onnx)", FlowNoise(args.flow, conds=[(float(args.flow_iso), cam)])))
     else:
         flow_note = f"noise-flow case skipped: no flow at {args.flow!r}"
     if args.cases:

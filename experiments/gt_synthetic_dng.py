@@ -28,7 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's simcam
 from simcam.groundtruth import Burst, GroundTruthConfig, SyntheticBurst, estimate_ground_truth  # noqa: E402
-from simcam.groundtruth.synthetic import write_dng_burst  # noqa: E402
+from simcam.groundtruth.synthetic_burst import write_dng_burst  # noqa: E402
 
 
 def main() -> None:

@@ -35,9 +35,6 @@ import numpy as np
 from .errors import ImageIOError, SimcamError
 from .frame import CameraMeta, RawFrame
 
-#: XYZ (D65) -> linear sRGB, IEC 61966-2-1.
-XYZ_TO_SRGB = np.array([[3.2406, -1.5372, -0.4986], [-0.9689, 1.8758, 0.0415], [0.0557, -0.2040, 1.0570]])
-
 
 def load_clean(path: str | Path, *, as_: str = "raw", profile=None, camera: str | None = None,
                iso: float | None = None, cfa: str | None = None) -> RawFrame:
@@ -70,6 +67,8 @@ def load_clean(path: str | Path, *, as_: str = "raw", profile=None, camera: str 
     else:
         if data.ndim != 3 or data.shape[2] < 3:
             raise ImageIOError(f"{path}: --as linear-srgb: expected 3 channels, got shape {data.shape}")
+        from .colour.display import XYZ_TO_SRGB
+
         mosaic = mosaic_rgb(data[:, :, :3], cfa)
         meta.color_matrix1 = XYZ_TO_SRGB.copy()
         meta.calibration_illuminant1 = 21

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..cfa import check_pattern
-from ..errors import StageError
+from ..errors import CfaError, StageError
 
 #: Rows of a phase plane processed at once: small enough that the temporaries
 #: of one strip stay in a core's L2 cache at 12 MP widths.
@@ -38,7 +38,10 @@ def check_mosaic(mosaic, cfa: str, method: str) -> tuple[np.ndarray, str]:
         raise StageError(f"demosaic ({method}): mosaic: expected at least 2 x 2 pixels, got shape {arr.shape}")
     if not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
         raise StageError(f"demosaic ({method}): mosaic: expected real numbers, got dtype {arr.dtype}")
-    pattern = check_pattern(cfa, where=f"demosaic ({method}): cfa")
+    try:
+        pattern = check_pattern(cfa, where=f"demosaic ({method}): cfa")
+    except CfaError as exc:  # a demosaic kernel's input error is a stage error
+        raise StageError(str(exc)) from None
     return np.ascontiguousarray(arr, dtype=np.float32), pattern
 
 

@@ -14,7 +14,7 @@ from .defects import (DefectMap, correct_defects, detect_defects_dark, detect_ho
 from .estimate import GroundTruth, GroundTruthConfig, estimate_ground_truth, stream_mean
 from .intensity import align_intensity, frame_outliers
 from .robust_mean import RobustMean, censored_mle, plain_mean, robust_mean, wls_cdf_fit, wls_objective
-from .synthetic import SyntheticBurst
+from .synthetic_burst import SyntheticBurst
 
 __all__ = [
     "Burst", "DefectMap", "GroundTruth", "GroundTruthConfig", "RobustMean", "SyntheticBurst",

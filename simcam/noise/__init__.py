@@ -9,6 +9,6 @@ the built-in models (a base module never imports its implementations).
 from .base import BLOCK_ROWS, NoiseCondition, NoiseModel, model_from_entry, model_types, register_model
 
 # The registry: importing each implementation registers it under its ``type``.
-from . import clipping, composite, gaussian, nlf, onnx_sampler, poisson_gaussian, poisson_mixture  # noqa: E402,F401
+from . import clipped, composite, gaussian, nlf, onnx_sampler, poisson_gaussian, poisson_mixture  # noqa: E402,F401
 
 __all__ = ["BLOCK_ROWS", "NoiseCondition", "NoiseModel", "model_from_entry", "model_types", "register_model"]

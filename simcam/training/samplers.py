@@ -277,7 +277,7 @@ class PipelineNoise:
 
 
 @dataclass
-class OnnxFlowNoise:
+class FlowNoise:
     """Noise Flow noise from an exported ONNX graph (``simcam flow export``), run with onnxruntime.
 
     The session is created lazily in each worker process with one intra-op
@@ -299,9 +299,9 @@ class OnnxFlowNoise:
 
     def _model(self):
         if getattr(self, "_flow", None) is None:
-            from ..noise.onnx_sampler import OnnxNoiseFlow  # type: ignore[import-not-found]
+            from ..noise.onnx_sampler import NoiseFlowRuntime  # type: ignore[import-not-found]
 
-            self._flow = OnnxNoiseFlow(self.path, threads=1)
+            self._flow = NoiseFlowRuntime(self.path, threads=1)
         return self._flow
 
     def __call__(self, clean: np.ndarray, rng: np.random.Generator, info: dict | None = None):

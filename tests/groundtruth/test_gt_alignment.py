@@ -6,7 +6,7 @@ from scipy import ndimage
 
 from simcam.groundtruth.alignment import (dense_field, local_shifts, ncc_threshold, patch_grid,
                                                   phase_correlation, prepare_reference, reject_outliers, warp)
-from simcam.groundtruth.synthetic import SyntheticBurst
+from simcam.groundtruth.synthetic_burst import SyntheticBurst
 
 
 def _texture(rng, n=320, smooth=1.5):

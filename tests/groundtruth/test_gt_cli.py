@@ -6,7 +6,7 @@ import numpy as np
 
 from simcam.cli import main
 from simcam.groundtruth import Burst, SyntheticBurst, estimate_ground_truth
-from simcam.groundtruth.synthetic import write_dng_burst
+from simcam.groundtruth.synthetic_burst import write_dng_burst
 
 
 def test_cli_on_dng_burst(tmp_path, capsys):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from simcam.groundtruth import Burst, GroundTruthConfig, SyntheticBurst, estimate_ground_truth
-from simcam.groundtruth.synthetic import write_dng_burst
+from simcam.groundtruth.synthetic_burst import write_dng_burst
 from simcam.errors import DatasetError
 from simcam.frame import CameraMeta, RawFrame
 

@@ -144,7 +144,7 @@ def test_meta_only_equals_full_read_and_file_untouched():
 
 def test_cfa_plane_color_is_respected(tmp_path):
     """CFAPattern indexes CFAPlaneColor: planes (B, G, R) turn a written RGGB into BGGR (LibRaw agrees)."""
-    from simcam.io.synthetic import make_test_dng
+    from simcam.io.sample_dng import make_test_dng
 
     path = make_test_dng(tmp_path / "a.dng", 32, 32, "RGGB")
     raw = bytearray(path.read_bytes())
@@ -158,7 +158,7 @@ def test_cfa_plane_color_is_respected(tmp_path):
 
 
 def test_iso_in_ifd0_with_several_values(tmp_path):
-    from simcam.io.synthetic import synthetic_meta
+    from simcam.io.sample_dng import synthetic_meta
 
     path = tmp_path / "iso.dng"
     tifffile.imwrite(path, np.zeros((24, 24), np.uint16), photometric=32803, extratags=[

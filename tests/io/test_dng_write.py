@@ -18,7 +18,7 @@ from simcam.frame import CameraMeta, RawFrame
 from simcam.io.dng import read_dng, read_dng_meta
 from simcam.io.dng_write import to_rational, write_dng
 from simcam.io.opcodes import parse_opcode_list, serialise_opcode_list
-from simcam.io.synthetic import radial_gain_maps, synthetic_meta
+from simcam.io.sample_dng import radial_gain_maps, synthetic_meta
 from simcam.stages.raw import Normalize
 
 

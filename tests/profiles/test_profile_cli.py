@@ -8,7 +8,7 @@ import tifffile
 
 from simcam.cli import main
 from simcam.io.dng import read_dng, read_dng_meta
-from simcam.io.synthetic import make_test_dng
+from simcam.io.sample_dng import make_test_dng
 from simcam.noise.noise_profile import noise_profile_site_values
 from simcam.profiles.importers import import_darktable
 from simcam.pipeline import Pipeline

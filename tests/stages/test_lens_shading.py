@@ -19,7 +19,7 @@ from conftest import shared_path
 from simcam.errors import StageError
 from simcam.frame import RawFrame
 from simcam.io.dng import read_dng_meta
-from simcam.io.synthetic import radial_gain_maps, synthetic_meta
+from simcam.io.sample_dng import radial_gain_maps, synthetic_meta
 from simcam.pipeline import Pipeline  # noqa: F401  (the stage must be registered for pipelines)
 from simcam.stages.base import get_stage_class
 from simcam.stages.lens_shading import LensShading, gain_field

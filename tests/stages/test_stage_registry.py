@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from simcam.frame import MOSAIC_KINDS, RawFrame
-from simcam.io.synthetic import radial_gain_maps, synthetic_meta
+from simcam.io.sample_dng import radial_gain_maps, synthetic_meta
 from simcam.pipeline import build_stage
 from simcam.stages.base import stage_types
 

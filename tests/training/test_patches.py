@@ -217,13 +217,13 @@ def test_simcam_noise_models_profile_and_noise_stage_plug_in():
 def test_onnx_noise_flow_sampler(tmp_path):
     """An exported (untrained, data-free) simcam Noise Flow as a sampler: deterministic, picklable, needs spawn."""
     pytest.importorskip("onnxruntime")
-    from simcam.training.samplers import OnnxFlowNoise
+    from simcam.training.samplers import FlowNoise
     from simcam.noise.flow.export import export_onnx
     from simcam.noise.flow.model import FlowConfig, NoiseFlow
 
     flow = NoiseFlow(FlowConfig(arch="paper", cameras=["A"], iso_knots=[100.0, 800.0]), seed=0)
     onnx_path, _ = export_onnx(flow, tmp_path / "model.onnx")
-    sampler = OnnxFlowNoise(str(onnx_path), conds=[(400.0, "A")])
+    sampler = FlowNoise(str(onnx_path), conds=[(400.0, "A")])
     ds = NoisyPatchDataset(_clean_sources(1), sampler, length=3, patch_size=8, seed=5)
     assert ds.needs_spawn
     a = ds[1]
