@@ -4,7 +4,7 @@ Cases, each with 0 workers, 2 process workers (PyTorch's ``DataLoader``) and 2 t
 workers (:class:`simcam.training.loader.ThreadLoader`), all through
 ``simcam.training.patches.make_loader``:
 
-* ``nlf kernel``: :class:`NLFNoise` with its default fused numba kernel (seed eq. 5.2/5.3);
+* ``nlf kernel``: :class:`NLFNoise` with its default fused numba kernel (Abdelhamed 2020, eq. 5.2/5.3);
 * ``nlf numpy``: the same sampler with ``normals="numpy"`` -- the hand-written numpy code
   (``rng.standard_normal`` then three array passes), the named baseline;
 * ``nlf profile``: noise from a calibration profile through ``simcam.noise`` (sidd-gp);

@@ -1,6 +1,6 @@
 """Acceptance run: a synthetic burst with known truth written as DNGs, through ``estimate_ground_truth``.
 
-The burst has clipping at both ends (black level 0, so DN 0 and the white level clip, seed eq.
+The burst has clipping at both ends (black level 0, so DN 0 and the white level clip, Abdelhamed 2020, eq.
 5.3), hot pixels (also in a dark sequence, written as DNGs too), flicker (0.2 % per frame plus
 two frames 15 % darker), and a smooth OIS-like drift field. Compared with the exact noise-free
 reference frame (scaled by the kept frames' mean gain):

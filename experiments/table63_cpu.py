@@ -1,4 +1,4 @@
-"""A CPU-sized reproduction of the seed's table 6.3 (section 6.5), and an honest DnCNN-vs-BM3D comparison.
+"""A CPU-sized reproduction of the Abdelhamed 2020, table 6.3 (section 6.5), and an honest DnCNN-vs-BM3D comparison.
 
 DnCNN (packed raw) is trained on noise from four sources and tested on held-out
 "real" captures:
@@ -142,7 +142,7 @@ def main() -> None:
     log(f"captures: {len(train)} train scenes x 4 frames, {len(test)} test scenes x 1 frame "
         f"({time.perf_counter() - t0:.1f} s)")
 
-    # noise levels estimated on the real training frames (seed 5.2.2 / 6.5)
+    # noise levels estimated on the real training frames (Abdelhamed 2020, section 5.2.2 / 6.5)
     nlfs = [(max(e.beta1, 1e-7), max(e.beta2, 1e-9)) for e in (estimate_nlf(f[0]) for f, _ in train)]
     from simcam.cfa import pack
 

@@ -1,2 +1,3 @@
-"""Dataset tools: capture sets, photon transfer, the calibration loop, ground truth from bursts
-(seed 5.3); denoiser benchmark, noise estimation and on-the-fly training data."""
+"""The calibration loop: capture sets, photon transfer, fit, diagnostics and report (moving to
+``simcam.calibration``). Ground truth, the denoiser benchmark and training data live in
+:mod:`simcam.groundtruth`, :mod:`simcam.denoise` and :mod:`simcam.training`."""

@@ -1,4 +1,4 @@
-"""Denoiser benchmark on SIDD-format blocks (seed sections 5.4 and 7.2).
+"""Denoiser benchmark on SIDD-format blocks (Abdelhamed 2020, section s 5.4 and 7.2).
 
 Scores, per block, PSNR and SSIM against the ground truth in raw (the
 mosaic, ``data_range=1``) and -- when each image's metadata and a rendering

@@ -1,6 +1,6 @@
 """Image-quality metrics: PSNR and SSIM with an explicit data range.
 
-Conventions (those of the SIDD benchmark, seed sections 5.4 and 7.2):
+Conventions (those of the SIDD benchmark, Abdelhamed 2020, section s 5.4 and 7.2):
 
 * **raw** blocks are compared as one 2-D image (the Bayer mosaic, normalised
   raw), ``data_range=1.0``; the score of a set is the mean of per-block scores.

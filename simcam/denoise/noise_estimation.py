@@ -1,7 +1,7 @@
-"""Single-image noise estimation (seed section 5.2.2).
+"""Single-image noise estimation (Abdelhamed 2020, section 5.2.2).
 
 * :func:`estimate_nlf` -- the signal-dependent noise level function
-  ``var = beta1 * y + beta2`` (seed eq. 5.2) of a normalised raw image with
+  ``var = beta1 * y + beta2`` (Abdelhamed 2020, eq. 5.2) of a normalised raw image with
   clipping to [0, 1] (eq. 5.3), after Foi et al. 2008, "Practical
   Poissonian-Gaussian noise modeling and fitting for single-image raw-data",
   IEEE TIP 17(10), doi:10.1109/TIP.2008.2001399: orthonormal Haar wavelet
@@ -213,7 +213,7 @@ def estimate_nlf(mosaic: np.ndarray, *, per_plane: bool = False, clip: tuple[flo
     per_plane : bool
         Also fit one (beta1, beta2) pair per packed plane.
     clip : (lo, hi) or None
-        Clipping range of the data (seed eq. 5.3); None for unclipped data.
+        Clipping range of the data (Abdelhamed 2020, eq. 5.3); None for unclipped data.
     n_levels : int, optional
         Level sets per plane (default: one per ~2,000 smooth blocks, 4..64).
 

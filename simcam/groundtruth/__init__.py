@@ -1,4 +1,4 @@
-"""Ground truth from bursts (seed section 5.3): defective pixels, intensity alignment,
+"""Ground truth from bursts (Abdelhamed 2020, section 5.3): defective pixels, intensity alignment,
 dense local alignment, censored robust mean.
 
 Public API::

@@ -1,10 +1,10 @@
-"""Dense local spatial alignment of a burst (seed 5.3.3, eq. 5.5).
+"""Dense local spatial alignment of a burst (Abdelhamed 2020, section 5.3.3, eq. 5.5).
 
 Per frame: sub-pixel Fourier phase correlation on overlapping patches against
 the reference (patch centres = landmarks), a thin-plate-spline interpolation of
 the landmark shifts to a dense field, and a warp of each CFA plane by that
 field. A global-translation mode (one phase-correlation shift per frame) is
-kept for comparison (seed fig. 5.6d).
+kept for comparison (Abdelhamed 2020, fig. 5.6d).
 
 Shift convention: ``d`` is the displacement of the frame's content relative to
 the reference, ``frame(p) = ref(p - d(p))``; the aligned frame is
@@ -221,10 +221,10 @@ def _starts(n: int, size: int, stride: int) -> np.ndarray:
 
 def patch_grid(shape: tuple[int, int], cfa: str | None, *, patch: int = 512, stride: int | None = None,
                min_patch: int = 32) -> PatchGrid:
-    """The seed's 512 x 512 patches at stride 256 (mosaic pixels), scaled for small images.
+    """The 512 x 512 patches at stride 256 (mosaic pixels), scaled for small images.
 
     The registration image has half the mosaic resolution for a Bayer sensor,
-    so the seed's patch is 256 pixels there. When fewer than two patches fit
+    so the dissertation's patch is 256 pixels there. When fewer than two patches fit
     along the short side, the patch shrinks to the largest power of two that
     gives two (never below ``min_patch`` registration pixels, and never above
     the image: then one patch covers it and the alignment is global).

@@ -1,8 +1,8 @@
-"""Defective-pixel detection and correction (seed 5.3.1).
+"""Defective-pixel detection and correction (Abdelhamed 2020, section 5.3.1).
 
 Detection: the mean image of a dark sequence (or of a flat sequence, after
 removing its smooth shading), one Gaussian per CFA plane fitted to its values by
-WLS on the CDF (the same estimator as the robust mean, seed eq. 5.10-5.11), and
+WLS on the CDF (the same estimator as the robust mean, Abdelhamed 2020, eq. 5.10-5.11), and
 every pixel outside the central ``confidence`` interval of that Gaussian flagged.
 Correction: cubic interpolation from same-colour neighbours within each CFA plane.
 
@@ -51,7 +51,7 @@ class DefectMap:
 
 
 def fit_gaussian_wls(values: np.ndarray, *, max_points: int = 200_000) -> tuple[float, float]:
-    """Gaussian (mu, sigma) of a set of values by WLS fit of the normal CDF (seed 5.3.1).
+    """Gaussian (mu, sigma) of a set of values by WLS fit of the normal CDF (Abdelhamed 2020, section 5.3.1).
 
     For more than ``max_points`` values the fit uses ``max_points`` evenly spaced
     order statistics (the empirical CDF sampled at their plotting positions),
@@ -97,7 +97,7 @@ def _flag(mean_image: np.ndarray, cfa: str | None, confidence: float, side: str,
 
 def detect_defects_dark(dark_mean: np.ndarray, cfa: str | None, *, confidence: float = 0.999,
                         side: str = "both") -> DefectMap:
-    """Defective pixels from the mean image of a dark sequence (seed 5.3.1).
+    """Defective pixels from the mean image of a dark sequence (Abdelhamed 2020, section 5.3.1).
 
     Parameters
     ----------
@@ -107,7 +107,7 @@ def detect_defects_dark(dark_mean: np.ndarray, cfa: str | None, *, confidence: f
         Bayer pattern (one Gaussian per plane) or None for a mono sensor.
     confidence : float
         Central probability of the fitted N(mu_dark, sigma_dark) kept as normal
-        (seed: 0.999, i.e. |x - mu| > 3.29 sigma is defective).
+        (Abdelhamed 2020: 0.999, i.e. |x - mu| > 3.29 sigma is defective).
     side : {"both", "high", "low"}
         Which tail is flagged (hot/stuck are high, dead are low).
     """

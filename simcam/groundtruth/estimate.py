@@ -1,6 +1,6 @@
-"""Ground truth from a burst: the seed's section 5.3 pipeline, streamed.
+"""Ground truth from a burst: the Abdelhamed 2020, section 5.3 pipeline, streamed.
 
-Steps (seed fig. 5.4): defective-pixel correction (5.3.1), frame outlier removal
+Steps (Abdelhamed 2020, fig. 5.4): defective-pixel correction (5.3.1), frame outlier removal
 and intensity alignment (5.3.2, eq. 5.4), reference choice (eq. 5.5) and dense
 local alignment (5.3.3), robust per-pixel mean (5.3.4, eq. 5.6-5.12).
 
@@ -34,19 +34,19 @@ _EPS = 1e-6
 
 @dataclass
 class GroundTruthConfig:
-    """Settings of :func:`estimate_ground_truth` (defaults follow the seed where it says)."""
+    """Settings of :func:`estimate_ground_truth` (defaults follow Abdelhamed 2020 where it says)."""
 
-    method: str = "wls"               #: robust mean: wls (seed), mle (censored MLE) or mean (plain)
+    method: str = "wls"               #: robust mean: wls (Abdelhamed 2020), mle (censored MLE) or mean (plain)
     refine: int = 0                   #: Gauss-Newton steps on eq. 5.10 after the closed form (wls)
     uncensored_mean: bool = True      #: pixels without censored samples get the plain mean (efficient)
     #: wls sigma: "auto" = sigma from an NLF (beta1, beta2) fitted to the burst's own unclipped pixels
     #: (extension: far less noisy than a per-pixel sigma on clipped pixels); a known (beta1, beta2);
-    #: or None = sigma fitted per pixel as in the seed (eq. 5.10)
+    #: or None = sigma fitted per pixel as in Abdelhamed 2020 (eq. 5.10)
     nlf: tuple[float, float] | str | None = "auto"
     min_samples: int = 3              #: fewest uncensored samples for a fit; fewer -> fallback, invalid
     alignment: str = "local"          #: local (TPS from patch shifts), global (one shift), none
-    patch: int = 512                  #: patch size, mosaic pixels (seed: 512); shrinks for small frames
-    stride: int | None = None         #: patch stride, mosaic pixels (default patch / 2; seed: 256)
+    patch: int = 512                  #: patch size, mosaic pixels (Abdelhamed 2020: 512); shrinks for small frames
+    stride: int | None = None         #: patch stride, mosaic pixels (default patch / 2; Abdelhamed 2020: 256)
     upsample: int = 4                 #: correlation grid 1/upsample px around the peak, then a parabola
     normalization: str | None = None  #: cross-power normalisation: None (cross-correlation) or "phase"
     tps_smoothing: float = 0.0        #: RBFInterpolator smoothing of the thin-plate spline
@@ -77,7 +77,7 @@ class GroundTruthConfig:
 
 
 def fit_burst_nlf(store, kept, shape, rows: int, *, max_tiles: int = 64, bins: int = 64):
-    """Fit ``var = beta1 * mean + beta2`` (seed eq. 3.8) to the aligned burst's unclipped pixels.
+    """Fit ``var = beta1 * mean + beta2`` (Abdelhamed 2020, eq. 3.8) to the aligned burst's unclipped pixels.
 
     Per-pixel temporal mean and variance (ddof 1) of pixels with no censored or missing
     sample, from up to ``max_tiles`` evenly spread row tiles; pixels binned by mean
@@ -192,14 +192,14 @@ def stream_mean(burst: Burst, shape: tuple[int, int] | None = None, what: str = 
 def estimate_ground_truth(burst: Burst, *, dark: Burst | None = None, flat: Burst | None = None,
                           defects: DefectMap | None = None, config: GroundTruthConfig | None = None,
                           progress: bool = False) -> GroundTruth:
-    """Estimate the noise-free image of a burst (seed 5.3).
+    """Estimate the noise-free image of a burst (Abdelhamed 2020, section 5.3).
 
     Parameters
     ----------
     burst : Burst
         The frames (normalised raw, one scene, one ISO / exposure), at least 3.
     dark : Burst, optional
-        A dark sequence: defective pixels from its mean image (seed 5.3.1).
+        A dark sequence: defective pixels from its mean image (Abdelhamed 2020, section 5.3.1).
     flat : Burst, optional
         A flat sequence: more defective (hot/dead) pixels from its shading-free mean.
     defects : DefectMap, optional

@@ -1,4 +1,4 @@
-"""Intensity alignment of a burst (seed 5.3.2, eq. 5.4).
+"""Intensity alignment of a burst (Abdelhamed 2020, section 5.3.2, eq. 5.4).
 
 Frames whose mean lies outside the central ``confidence`` interval of the
 distribution of frame means are dropped; the rest are shifted to the common mean.
@@ -42,11 +42,11 @@ def frame_outliers(means: np.ndarray, *, confidence: float = 0.999, robust: bool
         Seed: 0.999, i.e. |mu_i - mu_a| > 3.29 sigma_a drops frame i.
     robust : bool
         Estimate the centre and spread by median and 1.4826 MAD instead of the
-        seed's mean and standard deviation. With the plain estimates one outlier
+        dissertation's mean and standard deviation. With the plain estimates one outlier
         among N <= 12 frames can never exceed 3.29 sigma (its z is at most
         (N-1)/sqrt(N)), so the robust form is the default.
 
-    ``mu_a`` is recomputed over the kept frames (seed: "re-calculate mu_a").
+    ``mu_a`` is recomputed over the kept frames (Abdelhamed 2020: "re-calculate mu_a").
     """
     m = np.asarray(means, dtype=np.float64)
     if m.ndim != 1 or m.size < 1 or not np.all(np.isfinite(m)):

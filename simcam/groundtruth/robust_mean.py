@@ -1,9 +1,9 @@
-"""Per-pixel robust mean of a burst with censored (clipped) samples (seed 5.3.4).
+"""Per-pixel robust mean of a burst with censored (clipped) samples (Abdelhamed 2020, section 5.3.4).
 
 Three estimators, all vectorised over pixels (no per-pixel Python loop):
 
 ``wls``
-    Seed eq. 5.6-5.12: samples at or beyond the clip points are dropped from the
+    Abdelhamed 2020, eq. 5.6-5.12: samples at or beyond the clip points are dropped from the
     fit, a normal CDF is fitted to the empirical CDF of the rest by weighted least
     squares with weights ``w = (F (1 - F))^(-1/2)`` (eq. 5.11). The empirical CDF
     is evaluated with Hazen plotting positions ``F_k = (k - 1/2) / n`` over *all*
@@ -21,7 +21,7 @@ Three estimators, all vectorised over pixels (no per-pixel Python loop):
     using the pixel's sufficient statistics.
 ``mean``
     The plain per-pixel mean (and standard deviation) of every finite sample,
-    clipped ones included: the baseline the seed compares against.
+    clipped ones included: the baseline Abdelhamed 2020 compares against.
 
 Units: normalised raw (dimensionless); ``sigma`` is the per-sample noise standard
 deviation in the same units. Samples are along ``axis`` (default 0: shape (N, P));
@@ -118,7 +118,7 @@ def _sorted_with_censoring(x: np.ndarray, lo: float, hi: float):
 
 def wls_cdf_fit(samples: np.ndarray, *, lo: float = 0.0, hi: float = 1.0, refine: int = 0,
                 min_samples: int = 3, axis: int = 0, nlf: tuple[float, float] | None = None) -> RobustMean:
-    """WLS fit of a normal CDF to the censored empirical CDF, per pixel (seed eq. 5.8-5.12).
+    """WLS fit of a normal CDF to the censored empirical CDF, per pixel (Abdelhamed 2020, eq. 5.8-5.12).
 
     Parameters
     ----------
@@ -126,7 +126,7 @@ def wls_cdf_fit(samples: np.ndarray, *, lo: float = 0.0, hi: float = 1.0, refine
         Burst samples of P pixels, normalised raw. NaN marks a missing sample.
         Samples ``<= lo`` or ``>= hi`` are censored (or ±inf, already marked).
     lo, hi : float
-        Clip points in normalised raw (seed: 0 and 1).
+        Clip points in normalised raw (Abdelhamed 2020: 0 and 1).
     refine : int
         Gauss-Newton iterations on the exact objective eq. 5.10 after the closed
         form (linearised) solution. 0 (default) keeps the closed form: it agrees
@@ -135,10 +135,10 @@ def wls_cdf_fit(samples: np.ndarray, *, lo: float = 0.0, hi: float = 1.0, refine
     min_samples : int
         Fewest uncensored samples for a fit (>= 2); fewer -> fallback, ``valid`` False.
     nlf : (beta1, beta2), optional
-        Known noise level function (seed eq. 5.2, e.g. the DNG NoiseProfile). Then
+        Known noise level function (Abdelhamed 2020, eq. 5.2, e.g. the DNG NoiseProfile). Then
         sigma = sqrt(beta1 mu + beta2) is not fitted: the regression keeps only its
         intercept, mu = sum u (x - sigma z) / sum u, iterated twice with sigma
-        re-evaluated at the new mu (an extension beyond the seed; it recovers most of
+        re-evaluated at the new mu (an extension beyond Abdelhamed 2020; it recovers most of
         the precision the two-parameter fit loses on heavily censored pixels).
 
     Returns
@@ -405,7 +405,7 @@ def plain_mean(samples: np.ndarray, *, lo: float = 0.0, hi: float = 1.0, min_sam
                axis: int = 0) -> RobustMean:
     """Plain per-pixel mean and standard deviation (ddof=1) of every finite sample.
 
-    Clipped samples are averaged as they are (the biased baseline of seed fig. 5.9);
+    Clipped samples are averaged as they are (the biased baseline of Abdelhamed 2020, fig. 5.9);
     NaN samples are skipped. ``valid`` is False only where no sample is finite.
     """
     x = _check_samples(samples, axis)

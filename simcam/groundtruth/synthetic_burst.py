@@ -1,11 +1,11 @@
-"""Synthetic bursts with known truth, for validation (seed fig. 5.6d / 5.9 set-ups).
+"""Synthetic bursts with known truth, for validation (Abdelhamed 2020, fig. 5.6d / 5.9 set-ups).
 
 The scene is a continuous function per colour (a B-spline surface over random
 coefficients plus smooth-edged discs), so any frame's noise-free image is known
 exactly under any drift. Frame i sees the scene displaced by a smooth field
-``d_i(p) = t_i D(p)`` (an OIS-like coaxial shift plus a radial term, seed 5.3.3),
+``d_i(p) = t_i D(p)`` (an OIS-like coaxial shift plus a radial term, Abdelhamed 2020, section 5.3.3),
 scaled by a flicker gain ``g_i``, with hot pixels added, then NLF noise
-``var = beta1 y + beta2`` (seed eq. 5.2) and clipping to [clip_low, 1] (eq. 5.3).
+``var = beta1 y + beta2`` (Abdelhamed 2020, eq. 5.2) and clipping to [clip_low, 1] (eq. 5.3).
 Randomness: frame i draws from ``SeedSequence([seed, i])``, dark frame i from ``[seed, 10000 + i]``,
 the scene from ``[seed]``, the hot pixels from ``[seed, 999999]``.
 """
@@ -33,7 +33,7 @@ class SyntheticBurst:
     cfa : str or None
         Bayer pattern, or None for mono.
     beta1, beta2 : float
-        NLF (seed eq. 5.2) on normalised raw.
+        NLF (Abdelhamed 2020, eq. 5.2) on normalised raw.
     drift_px : float
         Largest displacement (mosaic px) between the first and last frame at the image corners.
     global_drift : bool

@@ -1,6 +1,6 @@
 """SIDD-format denoising blocks in MATLAB ``.mat`` files (v5 and v7.3/HDF5), and folders of pairs.
 
-The SIDD benchmark (seed section 5.4) stores blocks as one array per file:
+The SIDD benchmark (Abdelhamed 2020, section 5.4) stores blocks as one array per file:
 ``[N, M, H, W]`` normalised raw (float32; image, block, row, column) or
 ``[N, M, H, W, 3]`` sRGB (uint8), e.g. ``BenchmarkNoisyBlocksRaw`` of shape
 ``[40, 32, 256, 256]``. Any N, M, H, W is accepted.

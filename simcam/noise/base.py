@@ -6,7 +6,7 @@ model *is* its profile entry: ``to_entry()`` / :func:`model_from_entry`), with
 ``sample(clean, cond, rng, *, chunk_rows=None) -> noisy``
     noisy normalised raw (float32, H x W) for clean normalised raw;
 ``log_prob(noisy, clean, cond) -> per-pixel log-likelihood`` in nats (float64),
-    where the density is tractable (DESIGN.md section 2).
+    where the density is tractable (a design choice: log_prob only where the density has a closed form).
 
 Per-CFA-site parameters are a float (all sites) or a list of 4 floats in the
 packed site order (0,0), (0,1), (1,0), (1,1) of :mod:`simcam.cfa`.

@@ -1,9 +1,9 @@
-"""``clipped``: a base model followed by clipping to [low, high] (seed eq. 3.9-3.10).
+"""``clipped``: a base model followed by clipping to [low, high] (Abdelhamed 2020, eq. 3.9-3.10).
 
 The likelihood is the censored one: inside (low, high) the base density; at
 ``noisy <= low`` the point mass ``P_base(noisy <= low)``; at ``noisy >= high``
 the point mass ``P_base(noisy >= high)``. For Gaussian bases this is the doubly
-censored normal of seed eq. 3.10. The mixed measure (Lebesgue on the interior
+censored normal of Abdelhamed 2020, eq. 3.10. The mixed measure (Lebesgue on the interior
 plus two atoms) is what the per-pixel value is a log-density of.
 """
 

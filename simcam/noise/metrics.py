@@ -1,7 +1,7 @@
 """Noise metrics: NLL per dimension, marginal KL (Noise Flow binning), variance vs intensity.
 
 Marginal KL follows the Noise Flow code (Abdelhamed et al. 2019,
-doi:10.1109/ICCV.2019.00326; DESIGN.md section 5): histograms of the signed
+doi:10.1109/ICCV.2019.00326): histograms of the signed
 noise with edges ``[-1000] + linspace(-0.1, 0.1, 65) + [1000]`` (64 inner bins
 of width 0.2/64 plus two overflow bins), forward KL ``D(real || model)`` summed
 over the bins where both histograms are non-empty. :data:`KL_BINNING` states it

@@ -1,6 +1,6 @@
 """Fused heteroscedastic Gaussian noise kernel: ``clip(x + sqrt(max(beta1 x + beta2, 0)) z)`` in one pass.
 
-The NLF noise of the seed (eq. 5.2; clipped, eq. 5.3) for on-the-fly training
+The NLF noise of Abdelhamed 2020 (eq. 5.2; clipped, eq. 5.3) for on-the-fly training
 data, where drawing normals with numpy and then combining them in four array
 passes costs more than the training step needs. One compiled loop reads the
 clean value, draws ``z ~ N(0, 1)`` with the ziggurat of
@@ -82,7 +82,7 @@ def _nlf_kernel(clean, beta1, beta2, lo, hi, out, seed, zk, zw, zf, zr):
 
 def nlf_noise(clean: np.ndarray, beta1: float, beta2: float, rng: np.random.Generator, *,
               clip: tuple[float, float] | None = (0.0, 1.0), out: np.ndarray | None = None) -> np.ndarray:
-    """Noisy copy of ``clean`` with variance ``beta1 * clean + beta2`` (seed eq. 5.2), clipped (eq. 5.3).
+    """Noisy copy of ``clean`` with variance ``beta1 * clean + beta2`` (Abdelhamed 2020, eq. 5.2), clipped (eq. 5.3).
 
     Parameters
     ----------

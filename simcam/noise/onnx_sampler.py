@@ -7,7 +7,7 @@ Packed tensors are NCHW with channels (0,0), (0,1), (1,0), (1,1) of the 2x2 CFA
 cell (:data:`simcam.cfa.PACK_OFFSETS`), normalised raw. Any ISO inside the trained
 range is accepted (the graph interpolates per-ISO parameters in log-ISO); outside
 it, unknown cameras, bad shapes and dtypes raise :class:`NoiseModelError`.
-Reference: seed ch. 6 (Noise Flow); DESIGN.md "Randomness" (the latent is an input).
+Reference: Abdelhamed 2020, ch. 6 (Noise Flow) (the latent is an input, so sampling is deterministic given it).
 
 :class:`NoiseFlowModel` registers the export as the pipeline noise model
 ``noiseflow_onnx`` (profile entry ``{type: noiseflow_onnx, path: ..., camera: ...}``).
@@ -239,7 +239,7 @@ class NoiseFlowModel(NoiseModel):
     The latent of row block ``b`` is drawn from ``block_rng(key, b)`` and the flow runs
     on tiles of ``tile_rows`` with a :data:`HALO_ROWS` halo, so the bytes do not depend
     on ``chunk_rows``, ``threads`` or ``tile_rows``. Needs the frame's ISO (inside the
-    export's trained range, interpolated in log-ISO) and even H and W. Seed ch. 6.
+    export's trained range, interpolated in log-ISO) and even H and W. Abdelhamed 2020, ch. 6.
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""``poisson_gaussian``: ``noisy = beta1 * Poisson(clean / beta1) + N(0, beta2)`` (seed eq. 3.6).
+"""``poisson_gaussian``: ``noisy = beta1 * Poisson(clean / beta1) + N(0, beta2)`` (Abdelhamed 2020, eq. 3.6).
 
 Sampling is exact (:func:`poisson_table.pg_sample_table`: alias tables and a
 compiled kernel, no normal approximation).
@@ -110,7 +110,7 @@ def pg_logcdf(x: np.ndarray, lam: np.ndarray, scale: np.ndarray, var: np.ndarray
 
 @register_model
 class PoissonGaussian(PoissonScaleModel):
-    """``noisy = beta1 * Poisson(clean / beta1) + N(0, beta2)`` (seed eq. 3.6).
+    """``noisy = beta1 * Poisson(clean / beta1) + N(0, beta2)`` (Abdelhamed 2020, eq. 3.6).
 
     Parameters
     ----------

@@ -105,7 +105,7 @@ class Noise(Stage):
 
 @register_stage
 class ClipRaw(Stage):
-    """Clip normalised raw to [low, high] (default [0, 1]): the sensor's censoring (seed eq. 3.9)."""
+    """Clip normalised raw to [low, high] (default [0, 1]): the sensor's censoring (Abdelhamed 2020, eq. 3.9)."""
 
     type = "clip_raw"
     accepts = frozenset({"raw"})

@@ -1,4 +1,4 @@
-"""On-the-fly noisy/clean training patches for PyTorch (seed sections 6.5 and 7.2).
+"""On-the-fly noisy/clean training patches for PyTorch (Abdelhamed 2020, section s 6.5 and 7.2).
 
 :class:`NoisyPatchDataset` (map-style) and :class:`NoisyPatchStream`
 (iterable, over a file list) yield dicts ``{"noisy": 4 x p x p, "clean": 4 x p x p,

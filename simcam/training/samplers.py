@@ -105,7 +105,7 @@ class _FusedKernelNoise:
 class GaussianNoise(_FusedKernelNoise):
     """Homoscedastic Gaussian noise, sigma ~ U(lo, hi) per sample (normalised raw units)."""
 
-    sigma: tuple[float, float] = (0.24 / 255, 11.51 / 255)  # seed section 6.5's range, 8-bit units / 255
+    sigma: tuple[float, float] = (0.24 / 255, 11.51 / 255)  # Abdelhamed 2020, section 6.5's range, 8-bit units / 255
     clip: bool = False
     normals: str = "kernel"
     needs_spawn: bool = False
@@ -133,7 +133,7 @@ class GaussianNoise(_FusedKernelNoise):
 
 @dataclass
 class NLFNoise(_FusedKernelNoise):
-    """Heteroscedastic Gaussian noise ``var = beta1 y + beta2`` (seed eq. 5.2), clipped to [0, 1] (eq. 5.3).
+    """Heteroscedastic Gaussian noise ``var = beta1 y + beta2`` (Abdelhamed 2020, eq. 5.2), clipped to [0, 1] (eq. 5.3).
 
     Parameters
     ----------

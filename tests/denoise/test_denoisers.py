@@ -11,7 +11,7 @@ from simcam.errors import DatasetError
 
 
 def test_gat_stabilises_variance_and_inverts_mean():
-    # Poisson-Gaussian z = b1 Poisson(y / b1) + N(0, b2) (seed eq. 3.6): the GAT gives var(f(z)) -> 1
+    # Poisson-Gaussian z = b1 Poisson(y / b1) + N(0, b2) (Abdelhamed 2020, eq. 3.6): the GAT gives var(f(z)) -> 1
     # (Makitalo & Foi 2013). With n = 200,000 draws the sample variance has relative SE
     # sqrt(2/n) = 0.3 %; the transform's own residual at y >= 0.05 (>= 12 expected counts) is < 1 %.
     rng = np.random.default_rng(0)

@@ -1,4 +1,4 @@
-"""Dense local alignment (seed 5.3.3): references are scikit-image, scipy.ndimage.shift and closed forms."""
+"""Dense local alignment (Abdelhamed 2020, section 5.3.3): references are scikit-image, scipy.ndimage.shift and closed forms."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""Defective pixels (seed 5.3.1) and intensity alignment (5.3.2)."""
+"""Defective pixels (Abdelhamed 2020, section 5.3.1) and intensity alignment (5.3.2)."""
 
 import numpy as np
 import pytest
@@ -90,7 +90,7 @@ def test_intensity_outliers_and_eq_5_4():
     io = frame_outliers(means)
     assert list(np.nonzero(~io.keep)[0]) == [7]
     assert io.mu_a == pytest.approx(np.delete(means, 7).mean())
-    # with few frames the seed's plain mean/std can never flag one outlier: z <= (N-1)/sqrt(N) = 2.85
+    # with few frames the dissertation's plain mean/std can never flag one outlier: z <= (N-1)/sqrt(N) = 2.85
     few = np.array([0.4, 0.401, 0.399, 0.4005, 0.3995, 0.4002, 0.3998, 0.4001, 0.3999, 0.2])
     assert not (~frame_outliers(few, robust=False).keep).any()
     assert (~frame_outliers(few).keep).sum() == 1

@@ -1,4 +1,4 @@
-"""The ground-truth pipeline end to end (seed 5.3) on synthetic bursts with known truth."""
+"""The ground-truth pipeline end to end (Abdelhamed 2020, section 5.3) on synthetic bursts with known truth."""
 
 import json
 

@@ -1,4 +1,4 @@
-"""Robust per-pixel mean (seed eq. 5.6-5.12): references are scipy optimisers and closed forms."""
+"""Robust per-pixel mean (Abdelhamed 2020, eq. 5.6-5.12): references are scipy optimisers and closed forms."""
 
 import numpy as np
 import pytest
@@ -15,7 +15,7 @@ def _burst(mu, sd, n, rng, lo=0.0, hi=1.0):
 
 
 def test_wls_matches_nelder_mead_on_eq_5_10():
-    # reference: scipy's Nelder-Mead on the seed's objective, pixel by pixel (what the SIDD code does)
+    # reference: scipy's Nelder-Mead on the objective of Abdelhamed 2020, eq. 5.10, pixel by pixel (what the SIDD code does)
     rng = np.random.default_rng(1)
     mu = np.array([0.005, 0.3, 0.97, 0.99, 0.012, 0.6])
     x = _burst(mu, 0.02, 40, rng)

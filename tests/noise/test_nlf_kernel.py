@@ -37,7 +37,7 @@ def test_heteroscedastic_variance_and_clipping_match_closed_forms():
     for y in (0.02, 0.3):
         x = np.full(N // 4, y, np.float32)
         d = nlf_noise(x, b1, b2, np.random.default_rng(1), clip=None).astype(np.float64) - y
-        var = b1 * y + b2  # seed eq. 5.2
+        var = b1 * y + b2  # Abdelhamed 2020, eq. 5.2
         assert d.var() == pytest.approx(var, rel=5 * np.sqrt(2 / d.size))
     # clipped at 0 (eq. 5.3): E[max(y + s z, 0)] = y Phi(y/s) + s phi(y/s)
     y, s = 0.01, np.sqrt(b1 * 0.01 + b2)

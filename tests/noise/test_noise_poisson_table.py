@@ -106,7 +106,7 @@ def test_ziggurat_constants():
 
 
 def test_moments_per_intensity_bin():
-    """Mean clean and variance beta1 clean + beta2 per bin (seed eq. 3.6) over
+    """Mean clean and variance beta1 clean + beta2 per bin (Abdelhamed 2020, eq. 3.6) over
     lambda from 0 to 2e4, crossing every table level and the PTRS fallback."""
     b1, b2 = 0.5e-4, 1e-6
     m = model_from_entry({"type": "poisson_gaussian", "beta1": b1, "beta2": b2})

@@ -6,7 +6,7 @@ normalised raw), ``noise`` float32 [N, 4, h, w] (noisy - clean), ``iso`` float64
 ``camera`` [N] (str). Sources: a ``.npz`` with those keys (``noisy`` may replace
 ``noise``), a folder of SIDD-style ``.MAT`` pairs, DNG bursts with a ground truth
 (``clean.dng`` or ``gt.npz``), or pairs synthesised from an NLF
-table (seed eq. 3.8: ``var = beta1 * clean + beta2``).
+table (Abdelhamed 2020, eq. 3.8: ``var = beta1 * clean + beta2``).
 """
 
 from __future__ import annotations
@@ -229,7 +229,7 @@ def load_sidd_pairs(root, *, patches_per_image: int = 64, size: int = 32, seed: 
     """Patch set from SIDD-style folders ``SSSS_III_CC_IIIII_...`` holding
     ``*NOISY_RAW_*.MAT`` and ``*GT_RAW_*.MAT`` (normalised raw mosaics).
 
-    Camera and ISO come from the folder name (seed ch. 5.2); patches of
+    Camera and ISO come from the folder name (Abdelhamed 2020, ch. 5.2); patches of
     ``2*size`` x ``2*size`` mosaic pixels at even offsets are packed by position
     (:data:`simcam.cfa.PACK_OFFSETS`). Noise is ``clip(noisy,0,1) - clip(clean,0,1)``
     as in the Noise Flow code.
