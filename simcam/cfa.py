@@ -47,7 +47,27 @@ def site_colour_index(cfa: str) -> np.ndarray:
 
 
 def pack(mosaic: np.ndarray) -> np.ndarray:
-    """H x W mosaic -> 4 x H/2 x W/2, channels in :data:`PACK_OFFSETS` order."""
+    """H x W mosaic -> 4 x H/2 x W/2, channels in :data:`PACK_OFFSETS` order.
+
+    Parameters
+    ----------
+    mosaic : ndarray
+        ``(..., H, W)`` with even H and W.
+
+    Returns
+    -------
+    ndarray
+        ``(..., 4, H/2, W/2)``; :func:`unpack` inverts it.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> m = np.arange(16).reshape(4, 4)
+    >>> pack(m)[:, 0, 0].tolist()  # the four sites of the top-left 2x2 cell
+    [0, 1, 4, 5]
+    >>> bool((unpack(pack(m)) == m).all())
+    True
+    """
     h, w = mosaic.shape[-2:]
     if h % 2 or w % 2:
         raise CfaError(f"pack: mosaic height and width must be even, got {h}x{w}")

@@ -62,6 +62,12 @@ def psnr(ref: np.ndarray, test: np.ndarray, *, data_range: float) -> float:
     -------
     float
         dB; ``inf`` for identical inputs.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> round(psnr(np.zeros((8, 8)), np.full((8, 8), 0.1), data_range=1.0), 6)  # MSE 0.01
+    20.0
     """
     ref, test = _check_pair(ref, test, data_range, "psnr")
     err = mse(ref, test)

@@ -263,7 +263,31 @@ def from_registry(entry: Any, registry: dict[str, type], *, base: type, noun: st
 
 
 def model_from_entry(entry: Any, *, where: str = "model") -> NoiseModel:
-    """Build a model from its profile entry ``{type: ..., **params}`` or raise NoiseModelError."""
+    """Build a model from its profile entry ``{type: ..., **params}`` or raise NoiseModelError.
+
+    Parameters
+    ----------
+    entry : dict or NoiseModel
+        ``{"type": NAME, **params}`` as in a profile's ``model:`` node (a model is returned as is).
+    where : str
+        Location named in the error message.
+
+    Returns
+    -------
+    NoiseModel
+        An instance of the class registered under ``entry["type"]`` (see :func:`model_types`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import simcam.noise
+    >>> model = model_from_entry({"type": "nlf", "beta1": 1e-3, "beta2": 1e-5})
+    >>> clean = np.full((64, 64), 0.25, np.float32)
+    >>> noisy = model.sample(clean, NoiseCondition(), np.random.default_rng(0))
+    >>> var = float(np.var(noisy - clean))  # var = beta1 * x + beta2 (Abdelhamed 2020, eq. 5.2)
+    >>> abs(var / (1e-3 * 0.25 + 1e-5) - 1) < 0.1
+    True
+    """
     return from_registry(entry, _MODELS, base=NoiseModel, noun="noise model", expected=sorted(_MODELS), where=where)
 
 
