@@ -291,6 +291,14 @@ def model_from_entry(entry: Any, *, where: str = "model") -> NoiseModel:
     return from_registry(entry, _MODELS, base=NoiseModel, noun="noise model", expected=sorted(_MODELS), where=where)
 
 
+def wrapped_base(entry: Any, wrapper: type, message: str) -> NoiseModel:
+    """The ``base`` model of a wrapper model (clipped, composite); ValueError ``message`` if it is a ``wrapper`` too."""
+    m = model_from_entry(entry, where="base")
+    if isinstance(m, wrapper):
+        raise ValueError(message)
+    return m
+
+
 def describe_validation_error(exc: ValidationError) -> str:
     err = exc.errors()[0]
     loc = ".".join(str(p) for p in err["loc"]) or "(parameters)"

@@ -15,7 +15,7 @@ import numpy as np
 from pydantic import field_validator, model_validator
 
 from ..errors import NoiseModelError
-from .base import NoiseModel, check_clean, check_same_shape, model_from_entry, register_model
+from .base import NoiseModel, check_clean, check_same_shape, register_model, wrapped_base
 
 
 @register_model
@@ -30,10 +30,7 @@ class Clipped(NoiseModel):
     @field_validator("base", mode="before")
     @classmethod
     def _base(cls, v):
-        m = model_from_entry(v, where="base")
-        if isinstance(m, Clipped):
-            raise ValueError("base: a clipped model cannot wrap another clipped model")
-        return m
+        return wrapped_base(v, Clipped, "base: a clipped model cannot wrap another clipped model")
 
     @model_validator(mode="after")
     def _range(self):

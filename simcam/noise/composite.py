@@ -25,8 +25,8 @@ import numpy as np
 from pydantic import Field, PrivateAttr, field_validator
 
 from ..errors import NoiseModelError
-from .base import (NoiseCondition, NoiseModel, block_rng, check_clean, check_same_shape, frame_key, model_from_entry,
-                   register_model, site_map)
+from .base import (NoiseCondition, NoiseModel, block_rng, check_clean, check_same_shape, frame_key, register_model, site_map,
+                   wrapped_base)
 from .kernels import normal_f32
 from .effects.base import Effect, EffectContext, effect_from_entry
 
@@ -58,10 +58,7 @@ class Composite(NoiseModel):
     @field_validator("base", mode="before")
     @classmethod
     def _base(cls, v):
-        m = model_from_entry(v, where="base")
-        if isinstance(m, Composite):
-            raise ValueError("base: a composite cannot wrap another composite")
-        return m
+        return wrapped_base(v, Composite, "base: a composite cannot wrap another composite")
 
     @field_validator("effects", mode="before")
     @classmethod

@@ -249,16 +249,26 @@ def load_sidd_pairs(root, *, patches_per_image: int = 64, size: int = 32, seed: 
             noisy, gt = _read_mat(nf), _read_mat(gf)
             if noisy.shape != gt.shape or noisy.ndim != 2:
                 raise DatasetError(f"{nf}: shape {noisy.shape} vs ground truth {gt.shape}; expected equal 2-D mosaics")
-            rng = np.random.default_rng(np.random.SeedSequence([seed, d_i, f_i]))
-            _add_patches(parts, noisy, gt, rng, patches_per_image, size, where=str(nf))
-            parts["iso"].append(np.full(patches_per_image, float(iso)))
-            parts["camera"].append(np.full(patches_per_image, cam))
+            _add_pair(parts, noisy, gt, [seed, d_i, f_i], patches_per_image, size, float(iso), cam, where=str(nf))
+    return _patch_set(parts, f"{root}: no *NOISY_RAW_*.MAT files in the SIDD folders")
+
+
+def _add_pair(parts: dict, noisy, gt, seed_key: list[int], n: int, size: int, iso: float, camera: str, *, where: str):
+    """``n`` patches of one noisy/clean pair, drawn from ``SeedSequence(seed_key)``, with their ISO and camera."""
+    rng = np.random.default_rng(np.random.SeedSequence(seed_key))
+    _add_patches(parts, noisy, gt, rng, n, size, where=where)
+    parts["iso"].append(np.full(n, iso))
+    parts["camera"].append(np.full(n, camera))
+
+
+def _patch_set(parts: dict, empty: str, **where) -> dict:
+    """The collected patches as one checked set; DatasetError ``empty`` when there are none."""
     if not parts["clean"]:
-        raise DatasetError(f"{root}: no *NOISY_RAW_*.MAT files in the SIDD folders")
+        raise DatasetError(empty)
     return check_patch_set({
         "clean": np.stack(parts["clean"]), "noise": np.stack(parts["noise"]),
         "iso": np.concatenate(parts["iso"]), "camera": np.concatenate(parts["camera"]),
-    })
+    }, **where)
 
 
 def load_dng_bursts(root, *, patches_per_image: int = 64, size: int = 32, seed: int = 0) -> dict:
@@ -299,16 +309,9 @@ def load_dng_bursts(root, *, patches_per_image: int = 64, size: int = 32, seed: 
             if noisy.shape != gt.shape:
                 raise DatasetError(f"{f}: shape {noisy.shape} differs from its ground truth {gt.shape}")
             camera = frame.meta.unique_camera_model or f"{frame.meta.make} {frame.meta.model}".strip()
-            rng = np.random.default_rng(np.random.SeedSequence([seed, d_i, f_i]))
-            _add_patches(parts, noisy, gt, rng, patches_per_image, size, where=str(f))
-            parts["iso"].append(np.full(patches_per_image, float(frame.meta.iso)))
-            parts["camera"].append(np.full(patches_per_image, camera))
-    if not parts["clean"]:
-        raise DatasetError(f"{root}: no DNG bursts (folders of *.dng frames with clean.dng or gt.npz)")
-    return check_patch_set({
-        "clean": np.stack(parts["clean"]), "noise": np.stack(parts["noise"]),
-        "iso": np.concatenate(parts["iso"]), "camera": np.concatenate(parts["camera"]),
-    }, where=str(root))
+            _add_pair(parts, noisy, gt, [seed, d_i, f_i], patches_per_image, size, float(frame.meta.iso), camera,
+                      where=str(f))
+    return _patch_set(parts, f"{root}: no DNG bursts (folders of *.dng frames with clean.dng or gt.npz)", where=str(root))
 
 
 def load_data(path, **kw) -> dict:
