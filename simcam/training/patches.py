@@ -229,20 +229,38 @@ def _batch_tensor(n: int, p: int):
 
 
 # ------------------------------------------------------------------------------- datasets
-class _EpochedPatches:
+class _Epoched:
+    """The current epoch (:meth:`set_epoch` between epochs)."""
+
+    epoch: int
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = int(epoch)
+
+
+class _Sized:
+    """``length`` samples per epoch, indices 0 .. length - 1."""
+
+    length: int
+
+    def __len__(self) -> int:
+        return self.length
+
+    def _check_index(self, index: int) -> None:
+        if not 0 <= index < self.length:
+            raise IndexError(index)
+
+
+class _EpochedPatches(_Epoched):
     """What the synthetic-noise datasets share: a :class:`PatchMaker` and the current epoch."""
 
     maker: "PatchMaker"
-    epoch: int
 
     @property
     def needs_spawn(self) -> bool:
         return self.maker.needs_spawn
 
-    def set_epoch(self, epoch: int) -> None:
-        self.epoch = int(epoch)
-
-class NoisyPatchDataset(_EpochedPatches, torch.utils.data.Dataset):
+class NoisyPatchDataset(_EpochedPatches, _Sized, torch.utils.data.Dataset):
     """Map-style dataset of ``length`` noisy/clean packed patches per epoch.
 
     Parameters
@@ -273,24 +291,19 @@ class NoisyPatchDataset(_EpochedPatches, torch.utils.data.Dataset):
         self.length = int(length)
         self.epoch = int(epoch)
 
-    def __len__(self) -> int:
-        return self.length
-
     def __getitem__(self, index: int) -> dict[str, Any]:
-        if not 0 <= index < self.length:
-            raise IndexError(index)
+        self._check_index(index)
         return self.maker.make(index, self.epoch)
 
     def __getitems__(self, indices: list[int]) -> "PatchBatch":
         """A batch for the DataLoader's fetcher: made straight into stacked tensors (same values
         as ``[self[i] for i in indices]``)."""
         for i in indices:
-            if not 0 <= i < self.length:
-                raise IndexError(i)
+            self._check_index(i)
         return self.maker.make_batch(indices, self.epoch)
 
 
-class PairPatchDataset(torch.utils.data.Dataset):
+class PairPatchDataset(_Epoched, _Sized, torch.utils.data.Dataset):
     """Map-style dataset of aligned crops of real noisy/clean pairs (no synthetic noise).
 
     ``pairs`` is a list of ``(noisy, clean)`` normalised-raw mosaics; ``noisy``
@@ -312,15 +325,8 @@ class PairPatchDataset(torch.utils.data.Dataset):
         self.cfa, self.cfa_out = check_pattern(cfa), (check_pattern(cfa_out) if cfa_out else None)
         self.needs_spawn = False
 
-    def set_epoch(self, epoch: int) -> None:
-        self.epoch = int(epoch)
-
-    def __len__(self) -> int:
-        return self.length
-
     def __getitem__(self, index: int) -> dict[str, Any]:
-        if not 0 <= index < self.length:
-            raise IndexError(index)
+        self._check_index(index)
         rng = np.random.default_rng(np.random.SeedSequence([self.seed, self.epoch, int(index)]))
         k = int(rng.integers(len(self.pairs)))
         noisy, clean = self.pairs[k]
