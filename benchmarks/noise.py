@@ -4,7 +4,7 @@
   ``Generator.standard_normal(size, dtype=float32)`` of the same size (and
   ``torch.randn`` when torch is installed). Target: NLF time <= 1.5x the floor.
 * exact Poisson-Gaussian (``poisson_gaussian`` model, including its Gaussian
-  part; alias tables + numba kernel, :mod:`simcam.noise.poisson_table`) vs
+  part; alias tables + numba kernel, :mod:`simcam.noise.kernels.poisson`) vs
   numpy ``Generator.poisson`` over the same lambda = clean / beta1 (Poisson
   part only). Target: >= 4x faster. The steady-state rows reuse the cached
   tables (typical use: many frames with one profile); the one-time costs
@@ -81,7 +81,7 @@ def run(h: int, w: int, seed: int = 0, with_torch: bool = True) -> list[tuple[st
     except ImportError:  # pragma: no cover
         pass
     rows.append(("simcam nlf sample", mp / t_nlf, f"{t_nlf / t_floor:.2f}x floor time (target <= 1.5x)"))
-    from simcam.noise import poisson_table
+    from simcam.noise.kernels import poisson as poisson_table
 
     once = []
     t0, c0 = time.perf_counter(), time.process_time()

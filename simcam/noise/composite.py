@@ -27,7 +27,7 @@ from pydantic import Field, PrivateAttr, field_validator
 from ..errors import NoiseModelError
 from .base import (NoiseCondition, NoiseModel, block_rng, check_clean, check_same_shape, frame_key, register_model, site_map,
                    wrapped_base)
-from .kernels import normal_f32
+from .kernels.vectorised import normal_f32
 from .effects.base import Effect, EffectContext, effect_from_entry
 
 #: block-stream id of the read noise sampled apart (effects use 1 + their index).

@@ -9,7 +9,7 @@ from pydantic import field_validator
 
 from .base import SiteParam, register_model, site_map, validate_site_param
 from .gaussian import GaussianFamily
-from .kernels import _W
+from .kernels.vectorised import _W
 
 
 @register_model

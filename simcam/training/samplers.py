@@ -36,14 +36,14 @@ def hetero_gaussian(clean: np.ndarray, beta1: float, beta2: float, rng: np.rando
                     clip: bool, backend: str, out: np.ndarray | None = None) -> np.ndarray:
     """``clean + sqrt(beta1 clean + beta2) z`` (float32), clipped to [0, 1] if ``clip``.
 
-    ``backend="kernel"``: the fused numba kernel :func:`simcam.noise.nlf_kernel.nlf_noise`
+    ``backend="kernel"``: the fused numba kernel :func:`simcam.noise.kernels.nlf.nlf_noise`
     (one pass, about 3x faster than numpy's normal generator alone); otherwise the normals come
     from :func:`standard_normal` and the arithmetic from numpy. All are deterministic given
     ``rng`` but give different bytes. ``out``: float32 C-contiguous array to write into.
     """
     _check_normals(backend)
     if backend == "kernel":
-        from ..noise.nlf_kernel import nlf_noise
+        from ..noise.kernels.nlf import nlf_noise
 
         return nlf_noise(clean, beta1, beta2, rng, clip=(0.0, 1.0) if clip else None, out=out)
     std = np.sqrt(np.maximum(np.float32(beta1) * clean + np.float32(beta2), 0.0, dtype=np.float32))
@@ -59,7 +59,7 @@ def hetero_gaussian(clean: np.ndarray, beta1: float, beta2: float, rng: np.rando
 
 
 def _packed_kernel(mosaic, beta1, beta2, rng, clean_out, noisy_out, clip: bool) -> None:
-    from ..noise.nlf_kernel import nlf_noise_packed
+    from ..noise.kernels.nlf import nlf_noise_packed
 
     nlf_noise_packed(np.asarray(mosaic, dtype=np.float32), beta1, beta2, rng, clean_out, noisy_out,
                      clip=(0.0, 1.0) if clip else None)
@@ -145,7 +145,7 @@ class NLFNoise(_FusedKernelNoise):
     clip : bool
         Clip the noisy patch to [0, 1].
     normals : {"kernel", "auto", "numpy", "torch"}
-        "kernel" (default): one fused numba pass (:mod:`simcam.noise.nlf_kernel`,
+        "kernel" (default): one fused numba pass (:mod:`simcam.noise.kernels.nlf`,
         ziggurat normals). Otherwise the normals come from numpy's generator or a
         torch CPU generator seeded from it ("auto" uses torch when installed) and
         the arithmetic from numpy. All are deterministic given the sample's

@@ -4,7 +4,7 @@ The NLF noise of Abdelhamed 2020 (eq. 5.2; clipped, eq. 5.3) for on-the-fly trai
 data, where drawing normals with numpy and then combining them in four array
 passes costs more than the training step needs. One compiled loop reads the
 clean value, draws ``z ~ N(0, 1)`` with the ziggurat of
-:mod:`simcam.noise.poisson_table` (Marsaglia & Tsang 2000, 256 layers, exact
+:mod:`simcam.noise.kernels.poisson` (Marsaglia & Tsang 2000, 256 layers, exact
 tail) from counter-based SplitMix64 words, and writes the clipped noisy value:
 no temporaries, one read and one write per pixel (:func:`nlf_noise`; about 3.7x
 faster than numpy's ``standard_normal`` alone for a 4 x 256 x 256 patch).
@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .poisson_table import _GAMMA, _M8, _M52, _U1, _U8, ZIG_F, ZIG_K, ZIG_R, ZIG_W, _mix, zig_normal
+from .poisson import _GAMMA, _M8, _M52, _U1, _U8, ZIG_F, ZIG_K, ZIG_R, ZIG_W, _mix, zig_normal
 
 _U9 = np.uint64(9)
 _ALL_ACCEPTED = np.uint64(0x0101010101010101)

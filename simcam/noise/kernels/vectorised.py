@@ -9,7 +9,7 @@
 ``poisson_f32``
     Exact Poisson counts for an array of means (vectorised numpy; the
     Poisson-Gaussian models now sample with the faster table kernel of
-    :mod:`simcam.noise.poisson_table`, this remains as an independent exact
+    :mod:`simcam.noise.kernels.poisson`, this remains as an independent exact
     sampler). lambda >= 10: the transformed
     rejection with squeeze of Hoermann (1993), "The transformed rejection method
     for generating Poisson random variables", Insurance: Mathematics and

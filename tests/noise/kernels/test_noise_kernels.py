@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from simcam.noise.kernels import normal_f32, poisson_f32
+from simcam.noise.kernels.vectorised import normal_f32, poisson_f32
 
 
 def _chisq_pvalue(k: np.ndarray, lam: float) -> float:

@@ -11,7 +11,7 @@ from scipy import stats
 
 from simcam.noise import NoiseCondition, model_from_entry
 from simcam.noise.base import BLOCK_ROWS
-from simcam.noise.poisson_table import (A_STEP, FINE, N_FINE, TABLE_LAMBDA_MAX, ZIG_F, ZIG_R, ZIG_W, build_tables,
+from simcam.noise.kernels.poisson import (A_STEP, FINE, N_FINE, TABLE_LAMBDA_MAX, ZIG_F, ZIG_R, ZIG_W, build_tables,
                                         pg_sample_table, poisson_table_f32, table_means, table_pmf)
 
 COND = NoiseCondition(cfa="RGGB")

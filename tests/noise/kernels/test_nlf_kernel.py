@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from simcam.noise.nlf_kernel import nlf_noise
+from simcam.noise.kernels.nlf import nlf_noise
 
 N = 2_000_000
 
@@ -65,7 +65,7 @@ def test_deterministic_in_place_and_shape_kept():
 @pytest.mark.parametrize("p", [1, 5, 64])
 def test_packed_variant_equals_pack_then_noise(p):
     from simcam.cfa import pack
-    from simcam.noise.nlf_kernel import nlf_noise_packed
+    from simcam.noise.kernels.nlf import nlf_noise_packed
 
     src = np.random.default_rng(0).random((300, 310), dtype=np.float32)
     crop = src[3:3 + 2 * p, 7:7 + 2 * p]  # a strided view, odd offsets
