@@ -211,10 +211,7 @@ class PoissonScaleModel(NoiseModel):
     @field_validator("beta1")
     @classmethod
     def _check_beta1(cls, v):
-        validate_site_param(v, "beta1")
-        if (site_values(v, name="beta1") <= 0).any():
-            raise ValueError(f"beta1 must be > 0, got {v!r}")
-        return v
+        return validate_positive_site_param(v, "beta1")
 
     @field_validator("beta2")
     @classmethod
@@ -377,4 +374,12 @@ def validate_site_param(value: Any, name: str, *, minimum: float | None = 0.0) -
         raise ValueError(f"{name} must be finite, got {value!r}")
     if minimum is not None and (vals < minimum).any():
         raise ValueError(f"{name} must be >= {minimum}, got {value!r}")
+    return value
+
+
+def validate_positive_site_param(value: Any, name: str) -> SiteParam:
+    """pydantic helper: float or 4 floats, all finite and > 0."""
+    validate_site_param(value, name)
+    if (site_values(value, name=name) <= 0).any():
+        raise ValueError(f"{name} must be > 0, got {value!r}")
     return value
