@@ -108,6 +108,19 @@ class PhaseView:
         return self.planes[pa & 1][qb & 1][self.s0 + di:self.s1 + di, dj:dj + self.w2]
 
 
+def strip_setup(mosaic, cfa: str, method: str):
+    """What the strip kernels start from: the checked mosaic and pattern, its phase planes, the
+    half-size grid ``(h2, w2)``, the even-size float32 output and the strip height.
+
+    Returns ``(m, cfa, planes, h2, w2, rgb, rows)``; crop ``rgb`` to ``m.shape`` with :func:`crop_output`.
+    """
+    m, cfa = check_mosaic(mosaic, cfa, method)
+    planes, he, we = phase_planes(m)
+    h2, w2 = he // 2, we // 2
+    rgb = np.empty((he, we, 3), dtype=np.float32)
+    return m, cfa, planes, h2, w2, rgb, min(STRIP_ROWS, h2)
+
+
 def site_layout(cfa: str) -> dict[tuple[int, int], tuple[int, int]]:
     """Per phase ``(p, q)``: (colour index at the site, colour index of the
     horizontal neighbours). 0 = R, 1 = G, 2 = B."""
