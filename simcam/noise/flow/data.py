@@ -186,23 +186,14 @@ _SIDD_DIR = re.compile(r"^\d{4}_\d{3}_([A-Z0-9]{2})_(\d{5})_\d+_\d+_[A-Z]$")
 
 
 def _read_mat(path: Path) -> np.ndarray:
-    """First array of a SIDD .MAT (v7.3/HDF5 via h5py, else scipy.io)."""
-    try:
-        import h5py
+    """The SIDD raw image of a .MAT (variable ``x``, else the first one) as float32."""
+    from ...io.matlab import load_mat
 
-        with h5py.File(path, "r") as f:
-            key = "x" if "x" in f else next(k for k in f.keys() if not k.startswith("#"))
-            return np.asarray(f[key], dtype=np.float32).T  # MATLAB is column-major
-    except (OSError, StopIteration):
-        pass
-    try:
-        from scipy.io import loadmat
-
-        m = loadmat(path)
-        key = "x" if "x" in m else next(k for k in m if not k.startswith("__"))
-        return np.asarray(m[key], dtype=np.float32)
-    except Exception as exc:  # noqa: BLE001
-        raise DatasetError(f"{path}: cannot read as a MATLAB file ({exc})") from None
+    variables = load_mat(path, DatasetError)
+    key = "x" if "x" in variables else next(iter(variables), None)
+    if key is None:
+        raise DatasetError(f"{path}: no variables; expected a SIDD raw image")
+    return np.asarray(variables[key], dtype=np.float32)
 
 
 def _add_patches(parts: dict, noisy: np.ndarray, gt: np.ndarray, rng: np.random.Generator, count: int,
