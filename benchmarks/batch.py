@@ -168,7 +168,7 @@ def main(argv=None) -> int:
                           synth_patches_job, work, synth_tasks, lambda out: [out / "set.zarr"]))
     if "gt" in jobs:
         from simcam.io.dng import read_dng
-        from simcam.noise.synth import synth
+        from simcam.synth import synth
         from simcam.stages.noise import Noise
         from simcam.stages.raw import Normalize
 

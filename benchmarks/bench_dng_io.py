@@ -62,7 +62,7 @@ def main() -> None:
     raw = RawFrame(np.full(frame.data.shape, 0.25, np.float32), frame.meta, kind="raw")
     stage = LensShading()
     t_ls = median_time(lambda: stage(raw), repeat=3)
-    sys.path.insert(0, str(REPO / "tests"))
+    sys.path.insert(0, str(REPO / "tests" / "stages"))  # the independent per-pixel reference
     from test_lens_shading import reference_gain
 
     rng = np.random.default_rng(0)

@@ -1,10 +1,10 @@
 """Throughput of on-the-fly training data: packed noisy/clean patch pairs per second.
 
 Cases, each with 0 workers, 2 process workers (PyTorch's ``DataLoader``) and 2 thread
-workers (:class:`simcam.dataset.thread_loader.ThreadLoader`), all through
-``simcam.dataset.torchdata.make_loader``:
+workers (:class:`simcam.training.loader.ThreadLoader`), all through
+``simcam.training.patches.make_loader``:
 
-* ``nlf kernel``: :class:`NLFNoise` with its default fused numba kernel (seed eq. 5.2/5.3);
+* ``nlf kernel``: :class:`NLFNoise` with its default fused numba kernel (Abdelhamed 2020, eq. 5.2/5.3);
 * ``nlf numpy``: the same sampler with ``normals="numpy"`` -- the hand-written numpy code
   (``rng.standard_normal`` then three array passes), the named baseline;
 * ``nlf profile``: noise from a calibration profile through ``simcam.noise`` (sidd-gp);
@@ -99,8 +99,8 @@ def main() -> None:
 
     import torch
 
-    from simcam.dataset.noise_samplers import NLFNoise, ProfileNoise
-    from simcam.dataset.torchdata import NoisyPatchDataset, make_loader
+    from simcam.training.samplers import NLFNoise, ProfileNoise
+    from simcam.training.patches import NoisyPatchDataset, make_loader
 
     torch.set_num_threads(1)
     nlf = dict(beta1=(1e-4, 1e-2), beta2=(1e-6, 1e-4))
@@ -108,10 +108,10 @@ def main() -> None:
              ("nlf profile sidd-gp", ProfileNoise(str(ROOT / "profiles" / "sidd-gp.yaml"), isos=[100.0, 400.0, 800.0, 1600.0]))]
     flow_note = None
     if args.flow and Path(args.flow).exists():
-        from simcam.dataset.noise_samplers import OnnxFlowNoise
+        from simcam.training.samplers import FlowNoise
 
         cam = int(args.flow_camera) if args.flow_camera.isdigit() else args.flow_camera
-        cases.append(("noise-flow (onnx)", OnnxFlowNoise(args.flow, conds=[(float(args.flow_iso), cam)])))
+        cases.append(("noise-flow (onnx)", FlowNoise(args.flow, conds=[(float(args.flow_iso), cam)])))
     else:
         flow_note = f"noise-flow case skipped: no flow at {args.flow!r}"
     if args.cases:

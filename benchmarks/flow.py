@@ -46,7 +46,7 @@ def main(argv=None):
 
     from simcam.noise.flow.export import export_onnx
     from simcam.noise.flow.model import FlowConfig, NoiseFlow
-    from simcam.noise.onnx_sampler import OnnxNoiseFlow
+    from simcam.noise.onnx_sampler import NoiseFlowRuntime
 
     torch.set_num_threads(args.threads)
     flow = NoiseFlow(FlowConfig(arch="paper", cameras=["GP"], iso_knots=[100.0, 1600.0], sdn_per_iso=True)).eval()
@@ -58,7 +58,7 @@ def main(argv=None):
     mp = 4 * np.prod(shape[0:1] + shape[2:]) / 1e6
     with tempfile.TemporaryDirectory() as tmp:
         path, _ = export_onnx(flow, Path(tmp) / "model.onnx")
-        sampler = OnnxNoiseFlow(path, threads=args.threads)
+        sampler = NoiseFlowRuntime(path, threads=args.threads)
         ct, zt = torch.from_numpy(clean), torch.from_numpy(z)
 
         def run_torch():

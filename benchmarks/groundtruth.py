@@ -7,7 +7,7 @@
    (``resource.getrusage``), and the error against the known truth. Target: <= 5 min, < 8 GB
    on 2 cores.
 2. Robust-mean throughput on a crop: the vectorised WLS CDF fit (closed form and with 3 exact
-   Gauss-Newton steps) against the seed's method, ``scipy.optimize.minimize(method="Nelder-Mead")``
+   Gauss-Newton steps) against the method of Abdelhamed 2020, section 5.3.4, ``scipy.optimize.minimize(method="Nelder-Mead")``
    per pixel on eq. 5.10 (what the SIDD MATLAB code does with fminsearch), same samples.
 
 Run: python benchmarks/groundtruth.py [--frames 150] [--height 3000 --width 4000] [--skip-burst]
@@ -31,8 +31,8 @@ sys.path.insert(0, str(REPO))  # this checkout's simcam, not an installed one
 
 from scipy import ndimage, optimize  # noqa: E402
 
-from simcam.dataset.groundtruth import Burst, GroundTruthConfig, SyntheticBurst, estimate_ground_truth  # noqa: E402
-from simcam.dataset.groundtruth.robust_mean import wls_cdf_fit, wls_objective  # noqa: E402
+from simcam.groundtruth import Burst, GroundTruthConfig, SyntheticBurst, estimate_ground_truth  # noqa: E402
+from simcam.groundtruth.robust_mean import wls_cdf_fit, wls_objective  # noqa: E402
 
 WHITE = 4095.0
 
@@ -136,7 +136,7 @@ def bench_robust_mean(args) -> None:
     mu = rng.uniform(-0.01, 1.01, side * side)
     sd = np.sqrt(1e-3 * np.clip(mu, 0, None) + 1e-5)
     x = np.clip(mu + sd * rng.standard_normal((N, mu.size)), 0, 1).astype(np.float32)
-    # baseline: per-pixel Nelder-Mead on eq. 5.10 (seed: fminsearch), started at the sample mean/std
+    # baseline: per-pixel Nelder-Mead on eq. 5.10 (Abdelhamed 2020: fminsearch), started at the sample mean/std
     t = time.perf_counter()
     nm = np.empty(mu.size)
     for j in range(mu.size):

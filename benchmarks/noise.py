@@ -4,7 +4,7 @@
   ``Generator.standard_normal(size, dtype=float32)`` of the same size (and
   ``torch.randn`` when torch is installed). Target: NLF time <= 1.5x the floor.
 * exact Poisson-Gaussian (``poisson_gaussian`` model, including its Gaussian
-  part; alias tables + numba kernel, :mod:`simcam.noise.poisson_table`) vs
+  part; alias tables + numba kernel, :mod:`simcam.noise.kernels.poisson`) vs
   numpy ``Generator.poisson`` over the same lambda = clean / beta1 (Poisson
   part only). Target: >= 4x faster. The steady-state rows reuse the cached
   tables (typical use: many frames with one profile); the one-time costs
@@ -81,7 +81,7 @@ def run(h: int, w: int, seed: int = 0, with_torch: bool = True) -> list[tuple[st
     except ImportError:  # pragma: no cover
         pass
     rows.append(("simcam nlf sample", mp / t_nlf, f"{t_nlf / t_floor:.2f}x floor time (target <= 1.5x)"))
-    from simcam.noise import poisson_table
+    from simcam.noise.kernels import poisson as poisson_table
 
     once = []
     t0, c0 = time.perf_counter(), time.process_time()
@@ -104,7 +104,8 @@ def run(h: int, w: int, seed: int = 0, with_torch: bool = True) -> list[tuple[st
         t_np = _time(lambda: rng.poisson(lam))
         t_pg = _time(lambda: pg.sample(clean, cond, rng))
         rows.append((f"numpy poisson, lambda = clean/beta1 (ISO {iso}, max {1 / b1:.0f})", mp / t_np, "1.00x (baseline)"))
-        rows.append((f"simcam poisson_gaussian exact (ISO {iso})", mp / t_pg, f"{t_np / t_pg:.2f}x faster than numpy poisson (one thread)"))
+        rows.append((f"simcam poisson_gaussian exact (ISO {iso})", mp / t_pg,
+                     f"{t_np / t_pg:.2f}x faster than numpy poisson (one thread)"))
     # wall clock with row blocks on a thread pool (same bytes as one thread)
     n = os.cpu_count() or 1
     pg = model_from_entry({"type": "poisson_gaussian", "beta1": 1.764e-3, "beta2": 1.2e-5})

@@ -6,7 +6,7 @@ beta1 / beta2 of a Poisson-Gaussian profile at ISO 800 (``examples/data/loop_pro
 CPU rows: ``simcam.torch.add_noise`` for ``nlf`` (site-independent betas: simcam's fused kernel; per-site
 betas: the torch operations used on CUDA), exact ``poisson_gaussian`` (``torch.poisson``)
 and the loop profile's ``composite`` (ISO 800: Poisson-Gaussian + column FPN, DSNU, black-level
-offset); baselines: the numba NLF kernel (:func:`simcam.noise.nlf_kernel.nlf_noise`, unclipped),
+offset); baselines: the numba NLF kernel (:func:`simcam.noise.kernels.nlf.nlf_noise`, unclipped),
 plain numpy NLF (``clean + sqrt(beta1 clean + beta2) * standard_normal``), the numpy
 ``poisson_gaussian`` model (``NoiseModel.sample_stack``) and ``torch.randn`` of the same shape.
 CUDA rows (when available): the same torch rows against ``torch.randn`` of the same shape as the
@@ -35,8 +35,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from simcam.noise import model_from_entry  # noqa: E402
-from simcam.noise.nlf_kernel import nlf_noise  # noqa: E402
-from simcam.profiles import load_profile  # noqa: E402
+from simcam.noise.kernels.nlf import nlf_noise  # noqa: E402
+from simcam.profiles.schema import load_profile  # noqa: E402
 from simcam.torch import add_noise  # noqa: E402
 
 

@@ -18,7 +18,7 @@ from pathlib import Path
 import colour
 import numpy as np
 
-from simcam.frame import CameraMeta, GainMap, Opcode
+from simcam.frame import CameraMeta, GainMap
 from simcam.io.dng_write import write_dng
 from simcam.io.opcodes import gain_map_opcode
 

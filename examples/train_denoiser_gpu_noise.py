@@ -28,7 +28,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from simcam.profiles import load_profile
+from simcam.profiles.schema import load_profile
 from simcam.torch import AddNoise
 
 HERE = Path(__file__).resolve().parent

@@ -1,11 +1,11 @@
-"""Seed fig. 5.6d: local (thin-plate spline) vs global-translation alignment under a smooth drift field.
+"""Abdelhamed 2020, fig. 5.6d: local (thin-plate spline) vs global-translation alignment under a smooth drift field.
 
 A synthetic scene (fine texture and smooth-edged discs, RGGB mosaic) is observed through an
 OIS-like drift (coaxial shift + radial + rotational terms, up to ``--drift`` px between first and
 last frame), NLF noise (beta2 = beta1 / 100) and clipping; the ground truth of the reference frame
 (eq. 5.5) is estimated with local alignment, global alignment and none, and compared with the
 exact noise-free reference frame (PSNR, peak 1). Also draws the true and estimated shift field of
-one frame as a quiver plot (seed fig. 5.6b / 5.8).
+one frame as a quiver plot (Abdelhamed 2020, fig. 5.6b / 5.8).
 
 Run: python experiments/fig5_6d_alignment.py [--out experiments/out]
 """
@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's simcam
-from simcam.dataset.groundtruth import Burst, GroundTruthConfig, SyntheticBurst, estimate_ground_truth  # noqa: E402
-from simcam.dataset.groundtruth.alignment import dense_field, local_shifts, prepare_reference, reject_outliers  # noqa: E402
+from simcam.groundtruth import Burst, GroundTruthConfig, SyntheticBurst, estimate_ground_truth  # noqa: E402
+from simcam.groundtruth.alignment import dense_field, local_shifts, prepare_reference, reject_outliers  # noqa: E402
 
 
 def psnr(mse: float) -> float:

@@ -1,7 +1,7 @@
-"""Seed fig. 5.9: robust mean estimators under clipping, against the number of frames and beta1.
+"""Abdelhamed 2020, fig. 5.9: robust mean estimators under clipping, against the number of frames and beta1.
 
 Truth: a synthetic scene (values 0..1, so both ends clip) on a 256 x 256 mosaic; noise from
-the NLF (seed eq. 5.2, beta2 = beta1 / 100) and clipping to [0, 1] (eq. 5.3). Methods: WLS
+the NLF (Abdelhamed 2020, eq. 5.2, beta2 = beta1 / 100) and clipping to [0, 1] (eq. 5.3). Methods: WLS
 fit of the CDF (closed form and the exact eq. 5.10 minimiser), censored MLE, the plain mean of
 the clipped samples, and the oracle: the plain mean of the same samples before clipping.
 MSE is reported over all pixels and over the pixels with at least one clipped sample, and
@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's simcam, not an installed one
-from simcam.dataset.groundtruth import SyntheticBurst, censored_mle, plain_mean, wls_cdf_fit
+from simcam.groundtruth import SyntheticBurst, censored_mle, plain_mean, wls_cdf_fit
 
 METHODS = ("wls", "wls_exact", "mle", "mean", "oracle")
 
@@ -108,7 +108,7 @@ def main() -> None:
             ax.set_ylabel(f"MSE ({what})")
             ax.grid(alpha=0.3)
     axes[0, 0].legend(fontsize=8)
-    fig.suptitle("Robust mean under clipping (seed fig. 5.9 set-up)")
+    fig.suptitle("Robust mean under clipping (Abdelhamed 2020, fig. 5.9 set-up)")
     fig.tight_layout()
     fig.savefig(out / "fig5_9_robust_mean.png", dpi=110)
     print(f"wrote {out / 'fig5_9_robust_mean.png'}")

@@ -1,6 +1,6 @@
 """Acceptance run: a synthetic burst with known truth written as DNGs, through ``estimate_ground_truth``.
 
-The burst has clipping at both ends (black level 0, so DN 0 and the white level clip, seed eq.
+The burst has clipping at both ends (black level 0, so DN 0 and the white level clip, Abdelhamed 2020, eq.
 5.3), hot pixels (also in a dark sequence, written as DNGs too), flicker (0.2 % per frame plus
 two frames 15 % darker), and a smooth OIS-like drift field. Compared with the exact noise-free
 reference frame (scaled by the kept frames' mean gain):
@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's simcam
-from simcam.dataset.groundtruth import Burst, GroundTruthConfig, SyntheticBurst, estimate_ground_truth  # noqa: E402
-from simcam.dataset.groundtruth.synthetic import write_dng_burst  # noqa: E402
+from simcam.groundtruth import Burst, GroundTruthConfig, SyntheticBurst, estimate_ground_truth  # noqa: E402
+from simcam.groundtruth.synthetic_burst import write_dng_burst  # noqa: E402
 
 
 def main() -> None:
@@ -65,7 +65,7 @@ def main() -> None:
     rep = g.report
     # oracle: identical quantisation, no clipping, the pipeline's defect map
     q = lambda x: (np.round(x * white) / white).astype(np.float32)  # noqa: E731
-    from simcam.dataset.groundtruth import DefectMap
+    from simcam.groundtruth import DefectMap
 
     oracle = estimate_ground_truth(
         Burst.from_arrays([q(oracle_sb.frame(i)) for i in range(sb.n)], clip_low=-np.inf, clip_high=np.inf),

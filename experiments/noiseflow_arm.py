@@ -1,7 +1,7 @@
 """Noise Flow arm of ``table63_cpu.py``: a flow trained (briefly, on CPU) on the real training pairs.
 
 Uses :mod:`simcam.noise.flow` (the project's own Noise Flow; never the published
-weights). Returns a noise sampler for :class:`simcam.dataset.torchdata.NoisyPatchDataset`.
+weights). Returns a noise sampler for :class:`simcam.training.patches.NoisyPatchDataset`.
 """
 
 from __future__ import annotations
@@ -10,7 +10,6 @@ import numpy as np
 
 
 def noise_flow_sampler(train_pairs, *, log=print, out=None, epochs: int = 2, patches: int = 1000, seed: int = 0):
-    import torch
 
     from simcam.cfa import pack
     from simcam.noise.flow.model import NoiseFlow

@@ -1,4 +1,4 @@
-"""A CPU-sized reproduction of the seed's table 6.3 (section 6.5), and an honest DnCNN-vs-BM3D comparison.
+"""A CPU-sized reproduction of the Abdelhamed 2020, table 6.3 (section 6.5), and an honest DnCNN-vs-BM3D comparison.
 
 DnCNN (packed raw) is trained on noise from four sources and tested on held-out
 "real" captures:
@@ -48,10 +48,10 @@ SENSOR = dict(height=SIZE, width=SIZE, bits=10, K=1.5, read_dn=2.0, black_dn=64.
 def binned_mosaic(path: Path, b: int = 4) -> np.ndarray:
     """Normalised raw of a DNG, binned b x b within each CFA plane (less noise, more content per crop)."""
     from simcam.cfa import pack, unpack
-    from simcam.io.dng import read_dng
-    from simcam.stages.raw import Crop, Normalize
+    from simcam.io.normalized import read_normalized
+    from simcam.stages.raw import Crop
 
-    frame = Crop()(Normalize()(read_dng(path)))
+    frame = Crop()(read_normalized(path))
     p = pack(frame.data[: frame.height // (2 * b) * 2 * b, : frame.width // (2 * b) * 2 * b])
     c, h, w = p.shape
     return unpack(p.reshape(c, h // b, b, w // b, b).mean(axis=(2, 4)).astype(np.float32))
@@ -85,8 +85,8 @@ def capture(sensor, spec, scene: np.ndarray, n_noisy: int, n_gt: int, rng) -> tu
 def train_arm(name, dataset, args, log):
     import torch
 
-    from simcam.dataset.dncnn import build_dncnn, save_checkpoint, train_dncnn
-    from simcam.dataset.torchdata import make_loader
+    from simcam.denoise.dncnn import build_dncnn, save_checkpoint, train_dncnn
+    from simcam.training.patches import make_loader
 
     torch.manual_seed(0)
     model = build_dncnn(depth=args.depth, width=args.width)
@@ -127,11 +127,11 @@ def main() -> None:
     torch.set_num_threads(2)
     from loop_generator import HiddenEffectSensor, SensorSpec
 
-    from simcam.dataset.benchmark import run_benchmark
-    from simcam.dataset.noise_estimation import estimate_nlf, estimate_sigma
-    from simcam.dataset.noise_samplers import GaussianNoise, NLFNoise
-    from simcam.dataset.torchdata import NoisyPatchDataset, PairPatchDataset
-    from simcam.dataset.dncnn import DnCNNDenoiser
+    from simcam.denoise.benchmark import run_benchmark
+    from simcam.denoise.noise_estimation import estimate_nlf, estimate_sigma
+    from simcam.training.samplers import GaussianNoise, NLFNoise
+    from simcam.training.patches import NoisyPatchDataset, PairPatchDataset
+    from simcam.denoise.dncnn import DnCNNDenoiser
 
     rng = np.random.default_rng(2024)
     spec = SensorSpec(**SENSOR)
@@ -142,7 +142,7 @@ def main() -> None:
     log(f"captures: {len(train)} train scenes x 4 frames, {len(test)} test scenes x 1 frame "
         f"({time.perf_counter() - t0:.1f} s)")
 
-    # noise levels estimated on the real training frames (seed 5.2.2 / 6.5)
+    # noise levels estimated on the real training frames (Abdelhamed 2020, section 5.2.2 / 6.5)
     nlfs = [(max(e.beta1, 1e-7), max(e.beta2, 1e-9)) for e in (estimate_nlf(f[0]) for f, _ in train)]
     from simcam.cfa import pack
 
@@ -161,7 +161,8 @@ def main() -> None:
             arms[arm] = NoisyPatchDataset(clean_train, GaussianNoise(sigma=(min(sigmas), max(sigmas)), normals=NORMALS),
                                           length=n, patch_size=args.patch, seed=1)
         elif arm == "nlf":
-            arms[arm] = NoisyPatchDataset(clean_train, NLFNoise(nlfs=nlfs, normals=NORMALS), length=n, patch_size=args.patch, seed=1)
+            arms[arm] = NoisyPatchDataset(clean_train, NLFNoise(nlfs=nlfs, normals=NORMALS), length=n,
+                                          patch_size=args.patch, seed=1)
         elif arm == "real":
             arms[arm] = PairPatchDataset(train, length=n, patch_size=args.patch, seed=1)
         elif arm == "noiseflow":
@@ -176,7 +177,7 @@ def main() -> None:
     for arm, ds in arms.items():
         ck = out / f"dncnn_{arm}.pt"
         if args.reuse and ck.exists() and (out / "train_info.json").exists():
-            from simcam.dataset.dncnn import load_checkpoint
+            from simcam.denoise.dncnn import load_checkpoint
 
             models[arm] = load_checkpoint(ck)
             train_info[arm] = json.loads((out / "train_info.json").read_text())[arm]

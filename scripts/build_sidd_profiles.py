@@ -23,7 +23,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from simcam.profiles import CalibrationProfile  # noqa: E402
+from simcam.profiles.schema import CalibrationProfile  # noqa: E402
 
 CAMERAS = {
     "IP": ("Apple", "iPhone 7"),

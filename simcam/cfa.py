@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import StageError
+from .errors import CfaError
 
 BAYER_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
 #: Packed channel order used everywhere in simcam: (0,0), (0,1), (1,0), (1,1).
@@ -18,9 +18,9 @@ PACK_OFFSETS = ((0, 0), (0, 1), (1, 0), (1, 1))
 
 
 def check_pattern(cfa: str, *, where: str = "cfa") -> str:
-    """Return ``cfa`` upper-cased, or raise if it is not a 2x2 Bayer pattern."""
+    """Return ``cfa`` upper-cased, or raise :class:`~simcam.errors.CfaError` if it is not a 2x2 Bayer pattern."""
     if not isinstance(cfa, str) or cfa.upper() not in BAYER_PATTERNS:
-        raise StageError(f"{where}: expected one of {', '.join(BAYER_PATTERNS)}, got {cfa!r}")
+        raise CfaError(f"{where}: expected one of {', '.join(BAYER_PATTERNS)}, got {cfa!r}")
     return cfa.upper()
 
 
@@ -47,17 +47,37 @@ def site_colour_index(cfa: str) -> np.ndarray:
 
 
 def pack(mosaic: np.ndarray) -> np.ndarray:
-    """H x W mosaic -> 4 x H/2 x W/2, channels in :data:`PACK_OFFSETS` order."""
+    """H x W mosaic -> 4 x H/2 x W/2, channels in :data:`PACK_OFFSETS` order.
+
+    Parameters
+    ----------
+    mosaic : ndarray
+        ``(..., H, W)`` with even H and W.
+
+    Returns
+    -------
+    ndarray
+        ``(..., 4, H/2, W/2)``; :func:`unpack` inverts it.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> m = np.arange(16).reshape(4, 4)
+    >>> pack(m)[:, 0, 0].tolist()  # the four sites of the top-left 2x2 cell
+    [0, 1, 4, 5]
+    >>> bool((unpack(pack(m)) == m).all())
+    True
+    """
     h, w = mosaic.shape[-2:]
     if h % 2 or w % 2:
-        raise StageError(f"pack: mosaic height and width must be even, got {h}x{w}")
+        raise CfaError(f"pack: mosaic height and width must be even, got {h}x{w}")
     return np.stack([mosaic[..., dy::2, dx::2] for dy, dx in PACK_OFFSETS], axis=-3)
 
 
 def unpack(packed: np.ndarray) -> np.ndarray:
     """4 x h x w packed planes -> 2h x 2w mosaic (inverse of :func:`pack`)."""
     if packed.shape[-3] != 4:
-        raise StageError(f"unpack: expected 4 packed channels, got shape {packed.shape}")
+        raise CfaError(f"unpack: expected 4 packed channels, got shape {packed.shape}")
     h, w = packed.shape[-2:]
     out = np.empty(packed.shape[:-3] + (2 * h, 2 * w), dtype=packed.dtype)
     for k, (dy, dx) in enumerate(PACK_OFFSETS):

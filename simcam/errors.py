@@ -28,6 +28,10 @@ class PipelineError(SimcamError):
     """A pipeline description or stage parameter is invalid."""
 
 
+class CfaError(SimcamError):
+    """A colour-filter-array pattern is not one of the four 2x2 Bayer patterns."""
+
+
 class StageError(SimcamError):
     """A stage cannot process the frame it was given."""
 

@@ -68,9 +68,9 @@ def synth_patches_job(payload: dict) -> dict:
     import zarr
 
     from .cfa import pack
-    from .dataset.torchdata import crop_origin
-    from .noise.synth import load_clean
-    from .profiles import load_profile
+    from .training.patches import crop_origin
+    from .synth import load_clean
+    from .profiles.schema import load_profile
     from .stages.noise import Noise
 
     i, k, p2 = int(payload["index"]), int(payload["patches"]), int(payload["patch_size"])
@@ -120,7 +120,7 @@ def ground_truth_job(payload: dict) -> dict:
     """
     import json
 
-    from .dataset.groundtruth import (Burst, DefectMap, GroundTruthConfig, estimate_ground_truth, load_defect_map,
+    from .groundtruth import (Burst, DefectMap, GroundTruthConfig, estimate_ground_truth, load_defect_map,
                                       save_defect_map)
     from .errors import DatasetError
 
@@ -145,7 +145,7 @@ def ground_truth_job(payload: dict) -> dict:
         res.save_npz(p["npz"])
         written.append(str(p["npz"]))
     if p.get("dng"):
-        from .dataset.groundtruth.dngout import write_ground_truth_dng
+        from .groundtruth.dngout import write_ground_truth_dng
 
         write_ground_truth_dng(p["dng"], res, burst)
         written.append(str(p["dng"]))
@@ -201,12 +201,12 @@ def loop_job(payload: dict) -> dict:
 
 
 def bench_job(payload: dict):
-    """One denoiser on one image's blocks (``simcam bench``): a :class:`~simcam.dataset.benchmark.BenchmarkResult`.
+    """One denoiser on one image's blocks (``simcam bench``): a :class:`~simcam.denoise.benchmark.BenchmarkResult`.
 
     Payload keys: ``noisy``, ``gt`` (the image's ``[M, H, W(, 3)]`` blocks), ``denoiser`` (spec),
     ``meta`` (CameraMeta or None), ``pipeline`` (renderer for sRGB scores, with ``meta``), ``cfa``.
     """
-    from .dataset.benchmark import pipeline_renderer, run_benchmark
+    from .denoise.benchmark import pipeline_renderer, run_benchmark
 
     meta = payload.get("meta")
     renderer = pipeline_renderer(payload["pipeline"]) if meta is not None else None

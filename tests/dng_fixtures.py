@@ -1,7 +1,7 @@
 """Reusable DNG fixtures for tests (import the names you need into a test module).
 
 ``make_dng(name="x.dng", h=32, w=32, cfa="RGGB", **meta_fields)`` writes a small
-synthetic DNG under the test's tmp_path (see :func:`simcam.io.synthetic.make_test_dng`).
+synthetic DNG under the test's tmp_path (see :func:`simcam.io.sample_dng.make_test_dng`).
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from simcam.io.synthetic import make_test_dng
+from simcam.io.sample_dng import make_test_dng
 
 
 @pytest.fixture

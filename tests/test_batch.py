@@ -75,7 +75,7 @@ def test_render_batch_resume_skips_done(inputs, tmp_path):
 
 def test_synth_training_set_same_bytes_for_any_worker_count(inputs, tmp_path):
     torch = pytest.importorskip("torch")
-    from simcam.dataset.zarr_dataset import TrainingSetDataset
+    from simcam.training.zarr_dataset import TrainingSetDataset
 
     srcs = [inputs / f"s{i}" / "clean.dng" for i in range(3)] + [inputs / "broken.dng"]
     common = ["--profile", PROFILE, "--isos", "100,800,1600", "--patches-per-source", 4, "--patch-size", 32,

@@ -190,7 +190,7 @@ def test_yaml_bomb_in_pipeline_is_refused_before_output(tmp_path):
 
 def test_profile_with_aliases_is_refused(tmp_path):
     from simcam.errors import ProfileError
-    from simcam.profiles import load_profile
+    from simcam.profiles.schema import load_profile
 
     p = tmp_path / "p.yaml"
     p.write_text("schema: 1\nx: &x {a: 1}\ny: *x\n")

@@ -1,4 +1,4 @@
-"""The runnable examples in the public entry points' docstrings (doctest)."""
+"""Run the examples in the docstrings of the main public entry points (``doctest``)."""
 
 from __future__ import annotations
 
@@ -7,11 +7,25 @@ import importlib
 
 import pytest
 
-MODULES = ["simcam.api", "simcam.yamlio", "simcam.io.outputs", "simcam.io.inputs", "simcam.io.npz", "simcam.batch"]
+MODULES = [
+    "simcam.api",
+    "simcam.batch",
+    "simcam.cfa",
+    "simcam.raw",
+    "simcam.yamlio",
+    "simcam.io.inputs",
+    "simcam.io.normalized",
+    "simcam.io.npz",
+    "simcam.io.outputs",
+    "simcam.noise.base",
+    "simcam.denoise.image_metrics",
+    "simcam.groundtruth.estimate",
+]
 
 
 @pytest.mark.parametrize("name", MODULES)
 def test_docstring_examples(name):
-    mod = importlib.import_module(name)
-    res = doctest.testmod(mod, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
-    assert res.attempted > 0 and res.failed == 0, res
+    module = importlib.import_module(name)
+    result = doctest.testmod(module, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
+    assert result.attempted > 0, f"{name}: no examples"
+    assert result.failed == 0, f"{name}: {result.failed} of {result.attempted} examples failed"

@@ -90,7 +90,7 @@ def test_render_bad_dng_one_line_exit_2_no_output(bad, tmp_path, capsys):
 
 
 def test_render_missing_color_matrix_names_field(tmp_path, capsys):
-    from simcam.io.synthetic import make_test_dng
+    from simcam.io.sample_dng import make_test_dng
 
     dng = make_test_dng(tmp_path / "nocm.dng", 32, 32, minimal=True, as_shot_neutral=np.array([0.5, 1.0, 0.6]))
     out = tmp_path / "o.png"

@@ -344,7 +344,7 @@ def _read_frame(f: Path, side: dict) -> tuple[np.ndarray, dict]:
                                         "iso": side.get("iso"), "exposure_s": side.get("exposure_s")}
     from ..cfa import shift_pattern
     from ..io.dng import read_dng
-    from ..stages.raw import black_level_map
+    from ..raw import black_level_map
 
     fr = read_dng(f)
     meta = fr.meta
@@ -365,8 +365,9 @@ def _read_sidd_dir(d: Path) -> Sequence:
     ``*METADATA_RAW_*.MAT`` tags (Abdelhamed et al., CVPR 2018). The .MAT images (variable
     ``x``) are normalised raw in [0, 1]; they are turned back into DN with the metadata's black
     and white levels."""
-    from ..io.sidd import _load_mat, read_sidd_meta
-    from ..stages.raw import black_level_map
+    from ..io.matlab import load_mat
+    from ..io.sidd import read_sidd_meta
+    from ..raw import black_level_map
 
     def find(tag):
         return sorted(p for p in d.iterdir() if tag in p.name.upper() and p.suffix.upper() == ".MAT")
@@ -377,7 +378,7 @@ def _read_sidd_dir(d: Path) -> Sequence:
     meta = read_sidd_meta(metas[0])
 
     def image(path):
-        v = _load_mat(path, DatasetError)
+        v = load_mat(path, DatasetError)
         x = v.get("x", next((a for a in v.values() if isinstance(a, np.ndarray) and a.ndim == 2), None))
         if x is None or np.ndim(x) != 2:
             raise DatasetError(f"{path}: no 2-D image variable 'x'; expected a SIDD RAW .MAT")

@@ -31,7 +31,7 @@ def bench(
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Batch: dask scheduler address."),
 ) -> None:
     """Denoise SIDD-format blocks and report PSNR/SSIM (raw, sRGB) and seconds per megapixel."""
-    from ..dataset.benchmark import load_metadata_dir, pipeline_renderer, run_benchmark
+    from ..denoise.benchmark import load_metadata_dir, pipeline_renderer, run_benchmark
     from ..errors import DatasetError
     from ..io.sidd_blocks import read_blocks, read_pair_folder
 
@@ -89,7 +89,7 @@ def bench(
     if csv_out:
         _write_csv(csv_out, results)
     if leaderboard:
-        from ..dataset.benchmark import update_leaderboard
+        from ..denoise.benchmark import update_leaderboard
 
         for result in results:
             update_leaderboard(leaderboard, result)
@@ -117,7 +117,7 @@ def _bench_batch(noisy_b, gt_b, denoisers, metas, pipeline, cfa, workers, schedu
     """Images x denoisers as a dask batch; returns the merged result per denoiser that fully ran and
     the number of failed items (each reported in one line)."""
     from ..batch import BatchConfig, Task, report, run_batch
-    from ..dataset.benchmark import merge_results
+    from ..denoise.benchmark import merge_results
     from ..jobs import bench_job
 
     tasks = [Task(f"{d} on image {i}", {"noisy": nb, "gt": gb, "denoiser": d,

@@ -1,4 +1,4 @@
-"""``simcam gt``: ground truth from a burst (seed section 5.3)."""
+"""``simcam gt``: ground truth from a burst (Abdelhamed 2020, section 5.3)."""
 
 from __future__ import annotations
 
@@ -35,10 +35,10 @@ def gt(
     defects: Optional[Path] = typer.Option(None, "--defects", help="Known defect map (.npz from --save-defects, or SIDD .mat)."),
     save_defects: Optional[Path] = typer.Option(None, "--save-defects", help="Write the defect map used to this .npz."),
     report: Optional[Path] = typer.Option(None, "--report", help="JSON report path (default: beside the first output)."),
-    method: str = typer.Option("wls", "--method", help="Robust mean: wls (seed), mle (censored MLE) or mean."),
+    method: str = typer.Option("wls", "--method", help="Robust mean: wls (Abdelhamed 2020), mle (censored MLE) or mean."),
     alignment: str = typer.Option("local", "--alignment", help="local (TPS from patch shifts), global or none."),
     intensity: str = typer.Option("additive", "--intensity", help="Intensity alignment: additive (eq. 5.4), multiplicative, none."),
-    patch: int = typer.Option(512, "--patch", help="Alignment patch size in mosaic pixels (seed 512)."),
+    patch: int = typer.Option(512, "--patch", help="Alignment patch size in mosaic pixels (Abdelhamed 2020: 512)."),
     interp_order: int = typer.Option(3, "--interp-order", help="Warp interpolation: 3 cubic, 1 linear."),
     pattern: Optional[str] = typer.Option(None, "--pattern", help="Glob selecting the burst's files (e.g. 'b_s_*.png')."),
     dark_pattern: Optional[str] = typer.Option(None, "--dark-pattern", help="Glob selecting the dark frames."),
@@ -55,7 +55,7 @@ def gt(
     """Estimate the noise-free image of a burst: defects, intensity and dense alignment, robust mean."""
     """Estimate the noise-free image of a burst (or of every burst of a folder, on dask):
     defects, intensity and dense alignment, robust mean."""
-    from ..dataset.groundtruth.burst import IMAGE_EXTS, RAW_EXTS, is_sidd_frame
+    from ..groundtruth.burst import IMAGE_EXTS, RAW_EXTS, is_sidd_frame
     from ..errors import DatasetError
     from ..io.outputs import check_output_file
     from ..jobs import ground_truth_job

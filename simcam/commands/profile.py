@@ -41,7 +41,7 @@ def import_darktable_cmd(
     output: Optional[Path] = typer.Option(None, "-o", "--output", help="Profile YAML to write (default: stdout)."),
 ) -> None:
     """Convert a darktable noise profile (a, b per RGB) to a simcam profile (nlf per ISO)."""
-    from ..noise.importers import import_darktable
+    from ..profiles.importers import import_darktable
 
     _check(output, (file,))
     _emit(import_darktable(file, camera, cfa=cfa, camera_id=camera_id), output)
@@ -54,7 +54,7 @@ def from_dng_cmd(
     output: Optional[Path] = typer.Option(None, "-o", "--output", help="Profile YAML to write (default: stdout)."),
 ) -> None:
     """Build a one-ISO profile from a DNG's NoiseProfile tag."""
-    from ..noise.importers import profile_from_dng
+    from ..profiles.importers import profile_from_dng
 
     _check(output, (file,))
     _emit(profile_from_dng(file, camera_id=camera_id), output)
@@ -70,7 +70,7 @@ def show_cmd(
     """Validate a profile and list its cameras, or print the model at one ISO."""
     import yaml
 
-    from ..profiles import load_profile
+    from ..profiles.schema import load_profile
 
     prof = load_profile(file)
     if iso is None:

@@ -55,8 +55,8 @@ def synth_cmd(
     from tqdm import tqdm
 
     from ..io.outputs import check_output_dir
-    from ..noise.synth import load_clean, synth
-    from ..profiles import load_profile
+    from ..profiles.schema import load_profile
+    from ..synth import load_clean, synth
     from ..stages.noise import Noise
 
     clean_path = clean[0]
@@ -100,7 +100,7 @@ def _training_set(inputs, output: Path, *, profile: Path, isos, exposure, camera
     from ..io.inputs import expand_inputs
     from ..io.outputs import check_output_dir
     from ..jobs import synth_patches_job
-    from ..profiles import load_profile
+    from ..profiles.schema import load_profile
     from ..trainingset import create_store, write_manifest
 
     if patch_size % 2:

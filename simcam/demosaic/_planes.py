@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..cfa import check_pattern
-from ..errors import StageError
+from ..errors import CfaError, StageError
 
 #: Rows of a phase plane processed at once: small enough that the temporaries
 #: of one strip stay in a core's L2 cache at 12 MP widths.
@@ -38,7 +38,10 @@ def check_mosaic(mosaic, cfa: str, method: str) -> tuple[np.ndarray, str]:
         raise StageError(f"demosaic ({method}): mosaic: expected at least 2 x 2 pixels, got shape {arr.shape}")
     if not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
         raise StageError(f"demosaic ({method}): mosaic: expected real numbers, got dtype {arr.dtype}")
-    pattern = check_pattern(cfa, where=f"demosaic ({method}): cfa")
+    try:
+        pattern = check_pattern(cfa, where=f"demosaic ({method}): cfa")
+    except CfaError as exc:  # a demosaic kernel's input error is a stage error
+        raise StageError(str(exc)) from None
     return np.ascontiguousarray(arr, dtype=np.float32), pattern
 
 
@@ -103,6 +106,19 @@ class PhaseView:
         pa, qb = self.p + a, self.q + b
         di, dj = pa // 2 + 1, qb // 2 + 1
         return self.planes[pa & 1][qb & 1][self.s0 + di:self.s1 + di, dj:dj + self.w2]
+
+
+def strip_setup(mosaic, cfa: str, method: str):
+    """What the strip kernels start from: the checked mosaic and pattern, its phase planes, the
+    half-size grid ``(h2, w2)``, the even-size float32 output and the strip height.
+
+    Returns ``(m, cfa, planes, h2, w2, rgb, rows)``; crop ``rgb`` to ``m.shape`` with :func:`crop_output`.
+    """
+    m, cfa = check_mosaic(mosaic, cfa, method)
+    planes, he, we = phase_planes(m)
+    h2, w2 = he // 2, we // 2
+    rgb = np.empty((he, we, 3), dtype=np.float32)
+    return m, cfa, planes, h2, w2, rgb, min(STRIP_ROWS, h2)
 
 
 def site_layout(cfa: str) -> dict[tuple[int, int], tuple[int, int]]:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._planes import STRIP_ROWS, PhaseView, check_mosaic, crop_output, phase_planes, site_layout
+from ._planes import PhaseView, crop_output, site_layout, strip_setup
 
 
 def demosaic_bilinear(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
@@ -37,12 +37,7 @@ def demosaic_bilinear(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
     ``colour_demosaicing.demosaicing_CFA_Bayer_bilinear`` away from the 1-pixel
     border (and everywhere on a phase-preserving mirror-padded mosaic).
     """
-    m, cfa = check_mosaic(mosaic, cfa, "bilinear")
-    h, w = m.shape
-    planes, he, we = phase_planes(m)
-    h2, w2 = he // 2, we // 2
-    rgb = np.empty((he, we, 3), dtype=np.float32)
-    rows = min(STRIP_ROWS, h2)
+    m, cfa, planes, h2, w2, rgb, rows = strip_setup(mosaic, cfa, "bilinear")
     buf = np.empty((rows, w2), dtype=np.float32)
     for s0 in range(0, h2, rows):
         s1 = min(s0 + rows, h2)
@@ -65,4 +60,4 @@ def demosaic_bilinear(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
                 t += nb(1, -1)
                 t += nb(1, 1)
                 np.multiply(t, 0.25, out=out[..., 2 - site])
-    return crop_output(rgb, h, w)
+    return crop_output(rgb, *m.shape)

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._planes import STRIP_ROWS, PhaseView, check_mosaic, crop_output, phase_planes, site_layout
+from ._planes import PhaseView, crop_output, site_layout, strip_setup
 
 
 def demosaic_malvar2004(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
@@ -42,13 +42,8 @@ def demosaic_malvar2004(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
     ``colour_demosaicing.demosaicing_CFA_Bayer_Malvar2004`` away from the 2-pixel
     border (and everywhere on a phase-preserving mirror-padded mosaic).
     """
-    m, cfa = check_mosaic(mosaic, cfa, "malvar2004")
-    h, w = m.shape
-    planes, he, we = phase_planes(m)
-    h2, w2 = he // 2, we // 2
-    rgb = np.empty((he, we, 3), dtype=np.float32)
+    m, cfa, planes, h2, w2, rgb, rows = strip_setup(mosaic, cfa, "malvar2004")
     layout = site_layout(cfa)
-    rows = min(STRIP_ROWS, h2)
     bufs = [np.empty((rows, w2), dtype=np.float32) for _ in range(5)]
     for s0 in range(0, h2, rows):
         s1 = min(s0 + rows, h2)
@@ -62,7 +57,7 @@ def demosaic_malvar2004(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
                 _green_site(nb, c, out, horiz, 2 - horiz, *t)
             else:
                 _red_blue_site(nb, c, out, 2 - site, *t)
-    return crop_output(rgb, h, w)
+    return crop_output(rgb, *m.shape)
 
 
 def _red_blue_site(nb, c, out, other, t1, t2, t3, t4, t5):

@@ -131,7 +131,7 @@ class _IFDBuilder:
 
 
 def _dn_samples(frame: RawFrame, *, clip: bool, where: str) -> np.ndarray:
-    from ..stages.raw import black_level_map
+    from ..raw import black_level_map
 
     meta = frame.meta
     # float32 is exact for integers below 2^24, so DN data needs no float64 copy

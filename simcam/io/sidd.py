@@ -7,8 +7,7 @@
   gives for a DNG.
 * ``DefectivePixelsMask_*.mat``: :func:`load_defect_mask`, bool H x W.
 
-Both MATLAB formats are read: v5/v7 with :func:`scipy.io.loadmat`, v7.3
-(HDF5) with h5py (arrays stored transposed, char as uint16).
+Both MATLAB formats are read by :func:`simcam.io.matlab.load_mat`.
 Reference: Abdelhamed, Lin, Brown, CVPR 2018, doi:10.1109/CVPR.2018.00182.
 """
 
@@ -24,83 +23,10 @@ from ..cfa import BAYER_PATTERNS, shift_pattern
 from ..errors import DatasetError, MetadataError
 from ..frame import CameraMeta
 from .dng import PLANE_COLOR_LETTERS, T, black_level_pattern
+from .matlab import load_mat
 from .opcodes import parse_opcode_list
 
 _TAG_NAMES = {code: name for name, code in T.items()}
-
-
-# ---------------------------------------------------------------------------
-# generic MATLAB loading
-# ---------------------------------------------------------------------------
-def _check_file(path: Path, err) -> None:
-    if not path.exists():
-        raise err(f"{path}: no such file")
-    if path.is_dir():
-        raise err(f"{path}: is a directory; expected a MATLAB .mat file")
-
-
-def _load_mat(path: Path, err) -> dict[str, Any]:
-    """Variables of a .mat file as plain Python/numpy values (structs -> dicts)."""
-    import scipy.io
-
-    _check_file(path, err)
-    try:
-        raw = scipy.io.loadmat(str(path), squeeze_me=True, struct_as_record=False, mat_dtype=False)
-    except NotImplementedError:  # MATLAB v7.3 = HDF5
-        return _load_mat73(path, err)
-    except Exception as exc:  # scipy raises ValueError/TypeError/OSError for non-MAT input
-        if _is_hdf5(path):
-            return _load_mat73(path, err)
-        raise err(f"{path}: not a MATLAB .mat file ({type(exc).__name__}: {exc})") from None
-    return {k: _from_scipy(v) for k, v in raw.items() if not k.startswith("__")}
-
-
-def _is_hdf5(path: Path) -> bool:
-    with open(path, "rb") as f:
-        head = f.read(1024)
-    return b"\x89HDF\r\n\x1a\n" in head
-
-
-def _from_scipy(v: Any) -> Any:
-    from scipy.io.matlab import mat_struct
-
-    if isinstance(v, mat_struct):
-        return {k: _from_scipy(getattr(v, k)) for k in v._fieldnames}
-    if isinstance(v, np.ndarray) and v.dtype == object:
-        return [_from_scipy(x) for x in v.ravel()]
-    return v
-
-
-def _load_mat73(path: Path, err) -> dict[str, Any]:
-    import h5py
-
-    try:
-        f = h5py.File(str(path), "r")
-    except OSError as exc:
-        raise err(f"{path}: not a MATLAB .mat file ({exc})") from None
-    with f:
-        return {k: _from_h5(f, f[k]) for k in f.keys() if not k.startswith("#")}
-
-
-def _from_h5(f, node) -> Any:
-    import h5py
-
-    if isinstance(node, h5py.Group):
-        return {k: _from_h5(f, node[k]) for k in node.keys()}
-    cls = node.attrs.get("MATLAB_class", b"")
-    cls = cls.decode() if isinstance(cls, bytes) else str(cls)
-    data = node[()]
-    if node.attrs.get("MATLAB_empty", 0):
-        return np.zeros((0,))
-    if node.dtype == h5py.ref_dtype:
-        items = [_from_h5(f, f[r]) for r in np.asarray(data).T.ravel()]
-        return items[0] if len(items) == 1 else items
-    arr = np.asarray(data).T  # MATLAB stores column-major
-    if cls == "char":
-        return "".join(chr(c) for c in arr.ravel(order="F"))
-    if cls == "logical":
-        arr = arr.astype(bool)
-    return arr.squeeze() if arr.ndim and arr.size == 1 else arr
 
 
 # ---------------------------------------------------------------------------
@@ -150,7 +76,7 @@ def read_sidd_meta(path: str | os.PathLike) -> CameraMeta:
         the image size and the source DNG file name.
     """
     path = Path(path)
-    variables = _load_mat(path, MetadataError)
+    variables = load_mat(path, MetadataError)
     md = variables.get("metadata")
     if md is None:
         md = next((v for v in variables.values() if isinstance(v, dict)), None)
@@ -286,7 +212,7 @@ def load_defect_mask(path: str | os.PathLike, *, variable: str | None = None) ->
         (e.g. 3044 x 4048 for the Pixel's 4048 x 3044 sensor).
     """
     path = Path(path)
-    variables = _load_mat(path, DatasetError)
+    variables = load_mat(path, DatasetError)
     arrays = {k: v for k, v in variables.items() if isinstance(v, np.ndarray) and v.ndim == 2}
     if variable is not None:
         if variable not in arrays:

@@ -1,6 +1,6 @@
 """SIDD-format denoising blocks in MATLAB ``.mat`` files (v5 and v7.3/HDF5), and folders of pairs.
 
-The SIDD benchmark (seed section 5.4) stores blocks as one array per file:
+The SIDD benchmark (Abdelhamed 2020, section 5.4) stores blocks as one array per file:
 ``[N, M, H, W]`` normalised raw (float32; image, block, row, column) or
 ``[N, M, H, W, 3]`` sRGB (uint8), e.g. ``BenchmarkNoisyBlocksRaw`` of shape
 ``[40, 32, 256, 256]``. Any N, M, H, W is accepted.
@@ -24,6 +24,7 @@ from typing import Literal
 import numpy as np
 
 from ..errors import DatasetError
+from .matlab import is_mat73, list_variables
 
 #: Variable names of the SIDD benchmark/validation files.
 SIDD_KEYS = (
@@ -36,31 +37,6 @@ _MATLAB_CLASS = {
     np.dtype(np.uint16): "uint16", np.dtype(np.int16): "int16", np.dtype(np.int32): "int32",
     np.dtype(np.uint32): "uint32", np.dtype(np.bool_): "logical",
 }
-
-
-def is_mat73(path: str | Path) -> bool:
-    """True when ``path`` is a MATLAB v7.3 (HDF5) file."""
-    import h5py
-
-    return bool(h5py.is_hdf5(str(path)))
-
-
-def list_variables(path: str | Path) -> dict[str, tuple[int, ...]]:
-    """Variable names and MATLAB-order shapes of a .mat file (either version)."""
-    path = Path(path)
-    _check_exists(path)
-    if is_mat73(path):
-        import h5py
-
-        with h5py.File(path, "r") as f:
-            return {k: tuple(reversed(v.shape)) for k, v in f.items()
-                    if isinstance(v, h5py.Dataset) and not k.startswith("#")}
-    import scipy.io
-
-    try:
-        return {name: tuple(shape) for name, shape, _ in scipy.io.whosmat(str(path))}
-    except Exception as exc:  # scipy raises ValueError/TypeError on garbage
-        raise DatasetError(f"{path}: not a MATLAB .mat file ({exc})") from None
 
 
 def read_blocks(path: str | Path, key: str | None = None) -> np.ndarray:
@@ -248,8 +224,3 @@ def read_single_image(path: Path) -> np.ndarray:
     if not (arr.ndim == 2 or (arr.ndim == 3 and arr.shape[2] == 3)):
         raise DatasetError(f"{path}: expected an H x W or H x W x 3 image, got shape {arr.shape}")
     return np.ascontiguousarray(arr, dtype=np.float32)
-
-
-def _check_exists(path: Path) -> None:
-    if not path.exists():
-        raise DatasetError(f"{path}: no such file")

@@ -6,7 +6,7 @@ model *is* its profile entry: ``to_entry()`` / :func:`model_from_entry`), with
 ``sample(clean, cond, rng, *, chunk_rows=None) -> noisy``
     noisy normalised raw (float32, H x W) for clean normalised raw;
 ``log_prob(noisy, clean, cond) -> per-pixel log-likelihood`` in nats (float64),
-    where the density is tractable (DESIGN.md section 2).
+    where the density is tractable (a design choice: log_prob only where the density has a closed form).
 
 Per-CFA-site parameters are a float (all sites) or a list of 4 floats in the
 packed site order (0,0), (0,1), (1,0), (1,1) of :mod:`simcam.cfa`.
@@ -214,10 +214,7 @@ class PoissonScaleModel(NoiseModel):
     @field_validator("beta1")
     @classmethod
     def _check_beta1(cls, v):
-        validate_site_param(v, "beta1")
-        if (site_values(v, name="beta1") <= 0).any():
-            raise ValueError(f"beta1 must be > 0, got {v!r}")
-        return v
+        return validate_positive_site_param(v, "beta1")
 
     @field_validator("beta2")
     @classmethod
@@ -243,13 +240,8 @@ def register_model(cls: type[NoiseModel]) -> type[NoiseModel]:
 
 
 def model_types() -> dict[str, type[NoiseModel]]:
-    """All registered model classes by ``type`` name."""
-    _load_builtin()
+    """All registered model classes by ``type`` name (:mod:`simcam.noise` registers the built-in ones)."""
     return dict(_MODELS)
-
-
-def _load_builtin() -> None:
-    from . import clipping, composite, gaussian, nlf, onnx_sampler, poisson_gaussian, poisson_mixture  # noqa: F401
 
 
 def from_registry(entry: Any, registry: dict[str, type], *, base: type, noun: str, expected: list[str],
@@ -271,9 +263,40 @@ def from_registry(entry: Any, registry: dict[str, type], *, base: type, noun: st
 
 
 def model_from_entry(entry: Any, *, where: str = "model") -> NoiseModel:
-    """Build a model from its profile entry ``{type: ..., **params}`` or raise NoiseModelError."""
-    _load_builtin()
+    """Build a model from its profile entry ``{type: ..., **params}`` or raise NoiseModelError.
+
+    Parameters
+    ----------
+    entry : dict or NoiseModel
+        ``{"type": NAME, **params}`` as in a profile's ``model:`` node (a model is returned as is).
+    where : str
+        Location named in the error message.
+
+    Returns
+    -------
+    NoiseModel
+        An instance of the class registered under ``entry["type"]`` (see :func:`model_types`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import simcam.noise
+    >>> model = model_from_entry({"type": "nlf", "beta1": 1e-3, "beta2": 1e-5})
+    >>> clean = np.full((64, 64), 0.25, np.float32)
+    >>> noisy = model.sample(clean, NoiseCondition(), np.random.default_rng(0))
+    >>> var = float(np.var(noisy - clean))  # var = beta1 * x + beta2 (Abdelhamed 2020, eq. 5.2)
+    >>> abs(var / (1e-3 * 0.25 + 1e-5) - 1) < 0.1
+    True
+    """
     return from_registry(entry, _MODELS, base=NoiseModel, noun="noise model", expected=sorted(_MODELS), where=where)
+
+
+def wrapped_base(entry: Any, wrapper: type, message: str) -> NoiseModel:
+    """The ``base`` model of a wrapper model (clipped, composite); ValueError ``message`` if it is a ``wrapper`` too."""
+    m = model_from_entry(entry, where="base")
+    if isinstance(m, wrapper):
+        raise ValueError(message)
+    return m
 
 
 def describe_validation_error(exc: ValidationError) -> str:
@@ -354,4 +377,12 @@ def validate_site_param(value: Any, name: str, *, minimum: float | None = 0.0) -
         raise ValueError(f"{name} must be finite, got {value!r}")
     if minimum is not None and (vals < minimum).any():
         raise ValueError(f"{name} must be >= {minimum}, got {value!r}")
+    return value
+
+
+def validate_positive_site_param(value: Any, name: str) -> SiteParam:
+    """pydantic helper: float or 4 floats, all finite and > 0."""
+    validate_site_param(value, name)
+    if (site_values(value, name=name) <= 0).any():
+        raise ValueError(f"{name} must be > 0, got {value!r}")
     return value

@@ -25,9 +25,9 @@ import numpy as np
 from pydantic import Field, PrivateAttr, field_validator
 
 from ..errors import NoiseModelError
-from .base import (NoiseCondition, NoiseModel, block_rng, check_clean, check_same_shape, frame_key, model_from_entry,
-                   register_model, site_map)
-from .kernels import normal_f32
+from .base import (NoiseCondition, NoiseModel, block_rng, check_clean, check_same_shape, frame_key, register_model, site_map,
+                   wrapped_base)
+from .kernels.vectorised import normal_f32
 from .effects.base import Effect, EffectContext, effect_from_entry
 
 #: block-stream id of the read noise sampled apart (effects use 1 + their index).
@@ -58,10 +58,7 @@ class Composite(NoiseModel):
     @field_validator("base", mode="before")
     @classmethod
     def _base(cls, v):
-        m = model_from_entry(v, where="base")
-        if isinstance(m, Composite):
-            raise ValueError("base: a composite cannot wrap another composite")
-        return m
+        return wrapped_base(v, Composite, "base: a composite cannot wrap another composite")
 
     @field_validator("effects", mode="before")
     @classmethod
@@ -217,7 +214,8 @@ class Composite(NoiseModel):
         y = check_same_shape(noisy, clean).astype(np.float32).astype(np.float64)
         bad = [e.type for e in self.effects if e.role() is None]
         if bad:
-            raise NoiseModelError(f"model 'composite': log_prob is not tractable with effect(s) {bad} (random per frame or discretising)")
+            raise NoiseModelError(f"model 'composite': log_prob is not tractable with effect(s) {bad} "
+                                  "(random per frame or discretising)")
         fixed = self.fixed_patterns(clean.shape)
         signal = clean.copy()
         for i, e in enumerate(self.effects):

@@ -12,8 +12,9 @@ from pydantic import field_validator
 from scipy.special import log_ndtr, ndtr
 
 from ..errors import NoiseModelError
-from .base import NoiseCondition, NoiseModel, SiteParam, check_clean, check_same_shape, register_model, site_map, site_values, validate_site_param
-from .kernels import normal_f32
+from .base import (NoiseCondition, NoiseModel, SiteParam, check_clean, check_same_shape, register_model, site_map, site_values,
+                   validate_site_param)
+from .kernels.vectorised import normal_f32
 
 _LOG_SQRT_2PI = 0.5 * np.log(2.0 * np.pi)
 

@@ -1,7 +1,7 @@
 """Noise metrics: NLL per dimension, marginal KL (Noise Flow binning), variance vs intensity.
 
 Marginal KL follows the Noise Flow code (Abdelhamed et al. 2019,
-doi:10.1109/ICCV.2019.00326; DESIGN.md section 5): histograms of the signed
+doi:10.1109/ICCV.2019.00326): histograms of the signed
 noise with edges ``[-1000] + linspace(-0.1, 0.1, 65) + [1000]`` (64 inner bins
 of width 0.2/64 plus two overflow bins), forward KL ``D(real || model)`` summed
 over the bins where both histograms are non-empty. :data:`KL_BINNING` states it
@@ -87,7 +87,8 @@ def variance_vs_intensity(noisy, clean, *, cfa: str | None = "RGGB", bins: int |
     noisy = np.asarray(noisy, dtype=np.float64)
     clean = np.asarray(clean, dtype=np.float64)
     if noisy.shape != clean.shape or noisy.ndim != 2:
-        raise NoiseModelError(f"variance_vs_intensity: expected two H x W arrays of one shape, got {noisy.shape} and {clean.shape}")
+        raise NoiseModelError(
+            f"variance_vs_intensity: expected two H x W arrays of one shape, got {noisy.shape} and {clean.shape}")
     if cfa is not None:
         cfa = check_pattern(cfa)
     edges = np.linspace(*value_range, bins + 1) if np.isscalar(bins) else np.asarray(bins, dtype=np.float64)

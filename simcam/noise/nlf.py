@@ -1,4 +1,4 @@
-"""``nlf``: heteroscedastic Gaussian noise, the noise level function (seed eq. 3.7-3.8, 5.2)."""
+"""``nlf``: heteroscedastic Gaussian noise, the noise level function (Abdelhamed 2020, eq. 3.7-3.8, 5.2)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from pydantic import field_validator
 
 from .base import SiteParam, register_model, site_map, validate_site_param
 from .gaussian import GaussianFamily
-from .kernels import _W
+from .kernels.vectorised import _W
 
 
 @register_model
@@ -25,7 +25,7 @@ class NLF(GaussianFamily):
         Signal-independent (read) variance, normalised raw^2; >= 0.
 
     These are the (S, O) pairs of the DNG NoiseProfile tag (DNG 1.6 spec,
-    tag 51041). Reference: seed eq. 3.8.
+    tag 51041). Reference: Abdelhamed 2020, eq. 3.8.
     """
 
     type: Literal["nlf"] = "nlf"

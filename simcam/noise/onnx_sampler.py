@@ -7,9 +7,9 @@ Packed tensors are NCHW with channels (0,0), (0,1), (1,0), (1,1) of the 2x2 CFA
 cell (:data:`simcam.cfa.PACK_OFFSETS`), normalised raw. Any ISO inside the trained
 range is accepted (the graph interpolates per-ISO parameters in log-ISO); outside
 it, unknown cameras, bad shapes and dtypes raise :class:`NoiseModelError`.
-Reference: seed ch. 6 (Noise Flow); DESIGN.md "Randomness" (the latent is an input).
+Reference: Abdelhamed 2020, ch. 6 (Noise Flow) (the latent is an input, so sampling is deterministic given it).
 
-:class:`NoiseFlowOnnx` registers the export as the pipeline noise model
+:class:`NoiseFlowModel` registers the export as the pipeline noise model
 ``noiseflow_onnx`` (profile entry ``{type: noiseflow_onnx, path: ..., camera: ...}``).
 """
 
@@ -72,7 +72,7 @@ def _metadata(path: Path, sess, role: str) -> dict:
     return meta
 
 
-class OnnxNoiseFlow:
+class NoiseFlowRuntime:
     """A Noise Flow exported to ONNX, run with onnxruntime (no torch).
 
     Parameters
@@ -223,15 +223,15 @@ _PROFILES = Path(__file__).resolve().parents[2] / "profiles"
 _SESSIONS: dict = {}
 
 
-def _cached_flow(path: Path, threads: int) -> OnnxNoiseFlow:
+def _cached_flow(path: Path, threads: int) -> NoiseFlowRuntime:
     key = (str(path.resolve()), path.stat().st_mtime_ns, int(threads))
     if key not in _SESSIONS:
-        _SESSIONS[key] = OnnxNoiseFlow(path, threads=threads)
+        _SESSIONS[key] = NoiseFlowRuntime(path, threads=threads)
     return _SESSIONS[key]
 
 
 @register_model
-class NoiseFlowOnnx(NoiseModel):
+class NoiseFlowModel(NoiseModel):
     """Noise Flow exported to ONNX (``simcam flow export``) as a pipeline noise model.
 
     ``noisy = clean + flow(z; clean, ISO, camera)`` with ``z = T * N(0, I)``; the
@@ -239,7 +239,7 @@ class NoiseFlowOnnx(NoiseModel):
     The latent of row block ``b`` is drawn from ``block_rng(key, b)`` and the flow runs
     on tiles of ``tile_rows`` with a :data:`HALO_ROWS` halo, so the bytes do not depend
     on ``chunk_rows``, ``threads`` or ``tile_rows``. Needs the frame's ISO (inside the
-    export's trained range, interpolated in log-ISO) and even H and W. Seed ch. 6.
+    export's trained range, interpolated in log-ISO) and even H and W. Abdelhamed 2020, ch. 6.
 
     Parameters
     ----------
@@ -264,7 +264,7 @@ class NoiseFlowOnnx(NoiseModel):
     tile_rows: int = 512
     tractable: ClassVar[bool] = True
 
-    def flow(self) -> OnnxNoiseFlow:
+    def flow(self) -> NoiseFlowRuntime:
         """The onnxruntime sampler (cached per file and thread count)."""
         p = Path(self.path)
         for cand in ([p] if p.is_absolute() else [p, _PROFILES / p]):
@@ -272,7 +272,7 @@ class NoiseFlowOnnx(NoiseModel):
                 return _cached_flow(cand, self.threads)
         raise NoiseModelError(f"noiseflow_onnx: path: {self.path!r} not found (looked in the working directory and {_PROFILES})")
 
-    def _camera(self, flow: OnnxNoiseFlow, cond: NoiseCondition) -> str:
+    def _camera(self, flow: NoiseFlowRuntime, cond: NoiseCondition) -> str:
         cam = self.camera or cond.camera
         if cam is None:
             if len(flow.cameras) == 1:

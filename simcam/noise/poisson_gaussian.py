@@ -1,6 +1,6 @@
-"""``poisson_gaussian``: ``noisy = beta1 * Poisson(clean / beta1) + N(0, beta2)`` (seed eq. 3.6).
+"""``poisson_gaussian``: ``noisy = beta1 * Poisson(clean / beta1) + N(0, beta2)`` (Abdelhamed 2020, eq. 3.6).
 
-Sampling is exact (:func:`poisson_table.pg_sample_table`: alias tables and a
+Sampling is exact (:func:`simcam.noise.kernels.poisson.pg_sample_table`: alias tables and a
 compiled kernel, no normal approximation).
 ``log_prob`` sums the Poisson-weighted Gaussian densities
 ``log sum_k Pois(k; lam) N(x; beta1 k, beta2)``, ``lam = clean / beta1``, over a
@@ -23,7 +23,7 @@ from scipy.special import gammaln, log_ndtr, logsumexp
 
 from ..errors import NoiseModelError
 from .base import PoissonScaleModel, check_clean, check_same_shape, register_model
-from .poisson_table import pg_sample_table
+from .kernels.poisson import pg_sample_table
 
 #: largest Poisson mean sampled exactly in float32 (integer counts stay exact).
 LAMBDA_MAX = float(2**22)
@@ -110,7 +110,7 @@ def pg_logcdf(x: np.ndarray, lam: np.ndarray, scale: np.ndarray, var: np.ndarray
 
 @register_model
 class PoissonGaussian(PoissonScaleModel):
-    """``noisy = beta1 * Poisson(clean / beta1) + N(0, beta2)`` (seed eq. 3.6).
+    """``noisy = beta1 * Poisson(clean / beta1) + N(0, beta2)`` (Abdelhamed 2020, eq. 3.6).
 
     Parameters
     ----------
@@ -141,7 +141,8 @@ class PoissonGaussian(PoissonScaleModel):
         b1 = np.broadcast_to(b1, clean.shape).astype(np.float64).ravel()
         b2 = np.broadcast_to(b2, clean.shape).astype(np.float64).ravel()
         if (b2 <= 0).any():
-            raise NoiseModelError(f"{cond.source or 'model'}: poisson_gaussian: log_prob needs beta2 > 0 (a density), got {self.beta2!r}")
+            raise NoiseModelError(
+                f"{cond.source or 'model'}: poisson_gaussian: log_prob needs beta2 > 0 (a density), got {self.beta2!r}")
         return clean.astype(np.float64).ravel() / b1, b1, b2
 
     def log_prob(self, noisy, clean, cond):

@@ -1,9 +1,9 @@
-"""``poisson_mixture``: a two-component Poisson scale mixture plus Gaussian read noise (seed eq. 3.12-3.13).
+"""``poisson_mixture``: a two-component Poisson scale mixture plus Gaussian read noise (Abdelhamed 2020, eq. 3.12-3.13).
 
 Per pixel a hidden z picks the Poisson scale ``s = beta1 * z`` (``z = z1`` with
 probability ``p1``, else ``z2``); ``noisy = s * Poisson(clean / s) + N(0, beta2)``.
 The mean stays ``clean`` and the conditional variance is ``s * clean + beta2``
-(our reading of seed eq. 3.12, which scales the Poisson count by ``alpha z``,
+(our reading of Abdelhamed 2020, eq. 3.12, which scales the Poisson count by ``alpha z``,
 made mean-preserving as the ``poisson_gaussian`` model is), so
 ``var = beta1 * (p1 z1 + (1 - p1) z2) * clean + beta2``.
 """

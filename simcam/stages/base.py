@@ -88,19 +88,12 @@ def register_stage(cls: type[Stage]) -> type[Stage]:
     return cls
 
 
-def _load_builtin_stages() -> None:
-    # Importing the package registers every built-in stage.
-    from .. import stages  # noqa: F401
-
-
 def stage_types() -> dict[str, type[Stage]]:
     """All registered stage classes by ``type`` key."""
-    _load_builtin_stages()
     return dict(_REGISTRY)
 
 
 def get_stage_class(key: str, *, where: str = "type") -> type[Stage]:
-    _load_builtin_stages()
     try:
         return _REGISTRY[key]
     except KeyError:

@@ -1,6 +1,6 @@
 """Lens-shading correction from DNG GainMap opcodes (stage ``lens_shading``).
 
-LibRaw does not apply OpcodeList2 (DESIGN.md, section 6), so smartphone and
+LibRaw does not apply OpcodeList2 (LibRaw's documentation: it does not process DNG opcode lists), so smartphone and
 action-camera lens shading is applied here, per Bayer phase, exactly as the
 DNG SDK's ``dng_opcode_GainMap`` does (DNG 1.6 spec, section 7, opcode 9;
 SDK ``dng_gain_map_interpolator``):

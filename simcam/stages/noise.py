@@ -58,7 +58,7 @@ class Noise(Stage):
     def _build_model(self):
         from ..noise.base import model_from_entry
         from ..noise.composite import Composite
-        from ..profiles import load_profile
+        from ..profiles.schema import load_profile
 
         p = self.params
         if p.profile is not None:
@@ -98,7 +98,7 @@ class Noise(Stage):
         noisy = np.asarray(drawn["noisy"], dtype=np.float32)
         if noisy.shape != frame.data.shape:
             raise StageError(f"stage 'noise': drawn noise has shape {noisy.shape}, the frame {frame.data.shape}")
-        from ..noise.importers import model_noise_profile
+        from ..noise.noise_profile import model_noise_profile
 
         meta = frame.meta
         nlf = model_noise_profile(self.model, meta.cfa)
@@ -107,38 +107,9 @@ class Noise(Stage):
         return frame.evolve(noisy, meta=meta, step=self.type)
 
 
-def nlf_pairs(model) -> np.ndarray | None:
-    """The DNG NoiseProfile (S, O) pairs of a model whose variance is ``beta1 * x + beta2``.
-
-    One pair when all sites agree, else 4 pairs in site order (0,0), (0,1), (1,0), (1,1)
-    (a writer must map them to CFA planes). None for models without that form.
-    """
-    from ..noise.base import site_values
-
-    m = model
-    if m.type == "composite":
-        m = m.base
-    if m.type == "clipped":
-        m = m.base
-    if m.type == "poisson_mixture":
-        zbar = m.p1 * m.z1 + (1 - m.p1) * m.z2
-        b1 = site_values(m.beta1, name="beta1") * zbar
-    elif m.type in ("nlf", "poisson_gaussian"):
-        b1 = site_values(m.beta1, name="beta1")
-    elif m.type == "gaussian":
-        b1 = np.zeros(4)
-    else:
-        return None
-    b2 = site_values(m.sigma, name="sigma") ** 2 if m.type == "gaussian" else site_values(m.beta2, name="beta2")
-    pairs = np.stack([b1, b2], axis=1)
-    if np.all(pairs == pairs[0]):
-        return pairs[:1].copy()
-    return pairs
-
-
 @register_stage
 class ClipRaw(Stage):
-    """Clip normalised raw to [low, high] (default [0, 1]): the sensor's censoring (seed eq. 3.9)."""
+    """Clip normalised raw to [low, high] (default [0, 1]): the sensor's censoring (Abdelhamed 2020, eq. 3.9)."""
 
     type = "clip_raw"
     accepts = frozenset({"raw"})

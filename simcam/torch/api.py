@@ -179,7 +179,7 @@ class AddNoise(nn.Module):
     def __init__(self, profile_or_model: Any, *, camera: Any = None, extrapolate: bool = False,
                  validate: bool = True, temperature: float | None = None):
         super().__init__()
-        from ..profiles import load_profile
+        from ..profiles.schema import load_profile
         from pathlib import Path
 
         if isinstance(profile_or_model, (str, Path)):

@@ -71,8 +71,7 @@ def _stacked(group: Group, per_uniq: list[list[dict]], i: int, offsets=None, sha
 
 
 def composite(group: Group, clean: torch.Tensor, ctx: Ctx) -> torch.Tensor:
-    from .dispatch import sample_group
-
+    sample_group = ctx.sample_group
     shape = tuple(clean.shape[-2:])
     offsets = ctx.offsets_of(group)
     fshape = shape if offsets is None else tuple(ctx.frame_shape)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Callable
 
 import numpy as np
 import torch
@@ -31,6 +32,9 @@ class Ctx:
     offsets: np.ndarray | None = None  # [B, 2] int64, mosaic pixels, even
     #: each sample's exposure time in seconds (dark_current, amp_glow, empirical_field), or None
     exposure_s: np.ndarray | None = None
+    #: the dispatcher (``dispatch.sample_group``), for models that sample a base model (composite,
+    #: clipped) without importing the module that imports them
+    sample_group: Callable | None = None
 
     def offsets_of(self, group) -> np.ndarray | None:
         """The crop offsets ``[G, 2]`` of a group's samples (None without ``frame_shape``)."""

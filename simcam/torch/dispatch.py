@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import torch
 
 from ..errors import NoiseModelError
@@ -39,6 +41,8 @@ def sample_group(group: Group, clean: torch.Tensor, ctx: Ctx) -> torch.Tensor:
     if fn is None:
         why = NOT_SUPPORTED.get(t, "no torch sampler is registered for it")
         raise NoiseModelError(f"model {t!r}: not supported by simcam.torch ({why})")
+    if ctx.sample_group is None:
+        ctx = replace(ctx, sample_group=sample_group)
     if t in _MOSAIC_ONLY and ctx.layout == PACKED:
         m = to_mosaic(clean)
         out = fn(group, m, ctx.with_layout(MOSAIC, tuple(m.shape[-2:])))

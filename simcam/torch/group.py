@@ -148,7 +148,7 @@ def resolve_models(source: Any, batch: int, *, iso: Any = None, camera: Any = No
     cache : dict, optional
         (iso, camera) -> model memo kept by callers across batches.
     """
-    from ..profiles import CalibrationProfile, load_profile
+    from ..profiles.schema import CalibrationProfile, load_profile
 
     if isinstance(source, (list, tuple)):
         if len(source) != batch:

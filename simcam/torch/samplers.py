@@ -44,7 +44,7 @@ def _nlf_host(group: Group, clean: torch.Tensor, ctx: Ctx):
     if (b1 != b1[0]).any() or (b2 != b2[0]).any():
         return None
     try:  # the kernel module may move; the torch path below is the same law
-        from ..noise.nlf_kernel import nlf_noise
+        from ..noise.kernels.nlf import nlf_noise
     except ImportError:  # pragma: no cover
         return None
     import numpy as np
@@ -154,9 +154,7 @@ def poisson_mixture(group: Group, clean: torch.Tensor, ctx: Ctx) -> torch.Tensor
 
 def clipped(group: Group, clean: torch.Tensor, ctx: Ctx) -> torch.Tensor:
     """The base model's sample clamped to ``[low, high]``."""
-    from .dispatch import sample_group
-
-    x = sample_group(group.sub(lambda m: m.base), clean, ctx)
+    x = ctx.sample_group(group.sub(lambda m: m.base), clean, ctx)
     lo = ctx.scalar(group, lambda m: m.low)
     hi = ctx.scalar(group, lambda m: m.high)
     return torch.minimum(torch.maximum(x, lo), hi)

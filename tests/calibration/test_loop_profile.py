@@ -54,7 +54,7 @@ def test_noise_stage_from_the_profile_draws_the_fitted_noise():
     """The written profile, read by simcam.profiles and sampled by the noise stage, has the loop model's
     photon-transfer curvature and read-noise crosstalk (closed forms in DN, see test_loop_simulate)."""
     from simcam.noise import NoiseCondition
-    from simcam.profiles import profile_from_dict
+    from simcam.profiles.schema import profile_from_dict
 
     c, a = -0.12, 0.35
     m = LoopModel("RGGB", np.full((2, 2), 64.0), 1023.0, 2.0, 3.0, 9.0,

@@ -12,7 +12,7 @@ spatial non-uniformity), A. Abdelhamed, "Noise Modelling for Smartphone Cameras"
 dissertation, York University, 2020, chapter 2 (shot, dark-current, read, quantisation
 noise, fixed-pattern noise, defects, crosstalk), and J. Janesick, "Photon Transfer", SPIE 2007.
 Nothing here imports simcam except the tests, which read the files back through
-``simcam.dataset.capture.read_capture_set`` (the input contract) and rawpy.
+``simcam.calibration.capture.read_capture_set`` (the input contract) and rawpy.
 
 Physics and units (``sensor.py``)
 ---------------------------------

@@ -96,7 +96,7 @@ def test_charge_crosstalk_lowers_flat_variance_not_dark():
 
 def test_capture_round_trip_rawpy_and_simcam(tmp_path):
     rawpy = pytest.importorskip("rawpy")
-    from simcam.dataset.capture import read_capture_set
+    from simcam.calibration.capture import read_capture_set
 
     spec = {"sensor": {"width": 64, "height": 48, "cfa": "GRBG", "black_dn": [[256, 260], [252, 258]]},
             "effects": {"dsnu": {"sigma_dn": 2.0}}, "isos": [100, 800],
@@ -130,7 +130,7 @@ def test_capture_round_trip_rawpy_and_simcam(tmp_path):
 
 
 def test_emva1288_descriptor_round_trip(tmp_path):
-    from simcam.dataset.capture import read_capture_set
+    from simcam.calibration.capture import read_capture_set
 
     spec = {"sensor": {"width": 40, "height": 32, "cfa": None, "bits": 12}, "isos": [100],
             "darks": {"exposures_s": [0.01], "frames": 2}, "flats": {"exposure_s": 0.01, "levels": [0.2, 0.5],
@@ -183,7 +183,7 @@ def test_every_case_runs_and_records_truth(case, tmp_path):
     if spec.get("fmt") == "dng" or "fmt" not in spec:
         spec["fmt"] = "npy"  # tiny frames: LibRaw refuses very small DNGs; the DNG path is tested above
     truth = write_capture_set(tmp_path, spec, seed=case["seed"])
-    from simcam.dataset.capture import read_capture_set
+    from simcam.calibration.capture import read_capture_set
 
     cs = read_capture_set(tmp_path)  # the input contract: sizes, metadata, unsaturated flats
     assert len(cs.sequences) == sum(1 for p in truth["sequences"] if spec["fmt"] != "emva" or p["kind"] != "scene")

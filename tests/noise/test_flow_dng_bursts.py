@@ -13,7 +13,7 @@ import rawpy
 from conftest import REPO
 from simcam.cli import main
 from simcam.errors import DatasetError
-from simcam.io.synthetic import make_test_dng
+from simcam.io.sample_dng import make_test_dng
 from simcam.noise.flow.data import load_data, load_dng_bursts
 
 BLACK, WHITE = 64.0, 1023.0

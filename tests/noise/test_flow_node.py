@@ -25,7 +25,7 @@ def test_node_matches_python(small_onnx, tmp_path):
     why = _node_ready()
     if why:
         pytest.skip(why)
-    from simcam.noise.onnx_sampler import OnnxNoiseFlow
+    from simcam.noise.onnx_sampler import NoiseFlowRuntime
 
     rng = np.random.default_rng(11)
     clean = rng.random((2, 4, 12, 10), dtype=np.float32)
@@ -39,7 +39,7 @@ def test_node_matches_python(small_onnx, tmp_path):
     )
     assert res.returncode == 0, res.stderr
     node = np.load(tmp_path / "noise.npy")
-    py = OnnxNoiseFlow(small_onnx[0], threads=1).sample(clean, z=z, iso=640.0, camera=1)
+    py = NoiseFlowRuntime(small_onnx[0], threads=1).sample(clean, z=z, iso=640.0, camera=1)
     assert node.shape == py.shape and node.dtype == np.float32
     assert np.max(np.abs(node - py)) <= 1e-5 * float(np.max(np.abs(py)))
 

@@ -17,7 +17,7 @@ pytest.importorskip("onnxruntime")
 
 from flow_helpers import nhwc_latent_to_nchw, nhwc_released_to_nchw, published_onnx, published_onnx_legacy, small_flow, small_onnx  # noqa: E402,F401  (helpers, fixtures)
 
-from simcam.noise.onnx_sampler import OnnxNoiseFlow  # noqa: E402
+from simcam.noise.onnx_sampler import NoiseFlowRuntime  # noqa: E402
 
 
 def _inputs(b, h, w, seed):
@@ -33,7 +33,7 @@ def test_onnxruntime_matches_torch(small_flow, small_onnx, size):
     clean, z = _inputs(b, h, w, seed=h)
     iso = np.array([100.0, 250.0, 1600.0][:b], dtype=np.float32)
     cam = np.array([0, 1, 1][:b], dtype=np.int64)
-    sampler = OnnxNoiseFlow(small_onnx[0], threads=1)
+    sampler = NoiseFlowRuntime(small_onnx[0], threads=1)
     noise = sampler.sample(clean, z=z, iso=iso, camera=cam)
     ll = sampler.log_prob(noise, clean=clean, iso=iso, camera=cam)
     with torch.no_grad():
@@ -74,8 +74,8 @@ def test_golden_vectors_through_onnx(published_onnx, published_onnx_legacy):
     from tests.conftest import shared_path
 
     g = np.load(shared_path("noiseflow/golden.npz"))
-    default = OnnxNoiseFlow(published_onnx[0], threads=1)
-    legacy = OnnxNoiseFlow(published_onnx_legacy[0], threads=1)
+    default = NoiseFlowRuntime(published_onnx[0], threads=1)
+    legacy = NoiseFlowRuntime(published_onnx_legacy[0], threads=1)
     assert legacy.meta["iso_mode"] == "legacy-released" and default.meta["iso_mode"] == "log-interpolated"
     assert (~g["iso_supported"].astype(bool)).sum() == 1
     for k in range(8):

@@ -15,7 +15,7 @@ import pytest
 pytest.importorskip("onnxruntime")
 
 from simcam.noise.flow.data import read_nlf_table  # noqa: E402
-from simcam.noise.onnx_sampler import OnnxNoiseFlow  # noqa: E402
+from simcam.noise.onnx_sampler import NoiseFlowRuntime  # noqa: E402
 
 PROFILES = Path(__file__).resolve().parents[2] / "profiles"
 
@@ -23,7 +23,7 @@ PROFILES = Path(__file__).resolve().parents[2] / "profiles"
 @pytest.mark.parametrize("iso", [100.0, 400.0, 1600.0])
 @pytest.mark.parametrize("level", [0.02, 0.3])
 def test_default_flow_matches_nlf(iso, level):
-    flow = OnnxNoiseFlow(PROFILES / "noiseflow_sidd_gp.onnx", threads=1)
+    flow = NoiseFlowRuntime(PROFILES / "noiseflow_sidd_gp.onnx", threads=1)
     b1, b2 = read_nlf_table(PROFILES / "sidd_pixel_nlf.csv")[("GP", iso)]
     clean = np.full((2, 4, 64, 64), level, np.float32)
     noise = flow.sample(clean, iso=iso, camera="GP", rng=np.random.default_rng(int(iso) + int(100 * level)))
@@ -34,7 +34,7 @@ def test_default_flow_matches_nlf(iso, level):
 
 
 def test_default_flow_metadata_and_continuous_iso():
-    flow = OnnxNoiseFlow(PROFILES / "noiseflow_sidd_gp.onnx", threads=1)
+    flow = NoiseFlowRuntime(PROFILES / "noiseflow_sidd_gp.onnx", threads=1)
     assert flow.cameras == ["GP"] and flow.iso_range == (100.0, 1600.0)
     assert flow.meta["packing_order"] == "(0,0),(0,1),(1,0),(1,1)"
     clean = np.full((1, 4, 64, 64), 0.3, np.float32)
@@ -47,7 +47,7 @@ def test_profile_yaml_and_pipeline_noise_stage():
     """profiles/noiseflow-sidd-gp.yaml -> noise stage -> variance of the NLF at that ISO."""
     from simcam.frame import CameraMeta, RawFrame
     from simcam.pipeline import Pipeline
-    from simcam.profiles import load_profile
+    from simcam.profiles.schema import load_profile
 
     prof = load_profile(PROFILES / "noiseflow-sidd-gp.yaml")
     assert prof.model_for(566.0, "GP").type == "noiseflow_onnx"

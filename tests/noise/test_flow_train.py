@@ -155,9 +155,9 @@ def test_cli_train_and_export(tmp_path):
                  "--batch-size", "4", "--threads", "1"]) == 0
     assert main(["flow", "export", str(tmp_path / "r" / "best.pt"), "--out", str(tmp_path / "m.onnx")]) == 0
     assert (tmp_path / "m.onnx").is_file() and (tmp_path / "m.loglik.onnx").is_file()
-    from simcam.noise.onnx_sampler import OnnxNoiseFlow
+    from simcam.noise.onnx_sampler import NoiseFlowRuntime
 
-    s = OnnxNoiseFlow(tmp_path / "m.onnx")
+    s = NoiseFlowRuntime(tmp_path / "m.onnx")
     assert s.cameras == ["GP"] and s.iso_range == (100.0, 1600.0)
     assert main(["flow", "export", "--out", str(tmp_path / "x.onnx")]) == 2
     assert main(["flow", "export", str(tmp_path / "missing.pt"), "--out", str(tmp_path / "x.onnx")]) == 2

@@ -260,7 +260,8 @@ def test_deterministic_effects_exact_values():
     q = _comp([{"type": "quantization", "range_dn": 10.0, "step_dn": 2.0}], base=zero).sample(
         np.full((2, 2), 0.33, np.float32), COND, np.random.default_rng(0))
     np.testing.assert_allclose(q, 0.4)  # 3.3 DN -> 4 DN with a 2-DN step
-    bl = _comp([{"type": "black_level_offset", "offset": [0.01, 0.0, 0.0, -0.01]}], base=zero).sample(clean, COND, np.random.default_rng(0))
+    bl = _comp([{"type": "black_level_offset", "offset": [0.01, 0.0, 0.0, -0.01]}], base=zero).sample(
+        clean, COND, np.random.default_rng(0))
     np.testing.assert_allclose(bl[:2, :2], [[0.51, 0.5], [0.5, 0.49]], rtol=1e-6)
     pp = _comp([{"type": "periodic_pattern", "amplitude": 0.01, "period_px": 4.0, "random_phase": False}], base=zero).sample(
         clean, COND, np.random.default_rng(0))

@@ -7,7 +7,7 @@ from scipy import stats
 
 from simcam.errors import NoiseModelError, ProfileError
 from simcam.noise import NoiseCondition, model_from_entry
-from simcam.profiles import load_profile
+from simcam.profiles.schema import load_profile
 
 COND = NoiseCondition(cfa="RGGB", exposure_s=1.0)
 

@@ -144,7 +144,8 @@ def test_poisson_gaussian_log_prob_matches_brute_force_sum():
     noisy = np.array([[-0.01, 0.004, 0.015, 0.33, 0.71, 0.9]], np.float32)
     k = np.arange(3001)[None, :]
     lam = clean.astype(np.float64)[0, :, None] / b1
-    ref = np.log(np.sum(stats.poisson.pmf(k, lam) * stats.norm.pdf(noisy.astype(np.float64)[0, :, None], b1 * k, np.sqrt(b2)), axis=1))
+    ref = np.log(np.sum(stats.poisson.pmf(k, lam) * stats.norm.pdf(noisy.astype(np.float64)[0, :, None], b1 * k, np.sqrt(b2)),
+                        axis=1))
     np.testing.assert_allclose(m.log_prob(noisy, clean, COND)[0], ref, rtol=1e-9, atol=1e-9)
 
 

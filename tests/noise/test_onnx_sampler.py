@@ -13,7 +13,7 @@ import pytest
 pytest.importorskip("onnxruntime")
 
 from simcam.errors import NoiseModelError  # noqa: E402
-from simcam.noise.onnx_sampler import OnnxNoiseFlow  # noqa: E402
+from simcam.noise.onnx_sampler import NoiseFlowRuntime  # noqa: E402
 from flow_helpers import small_onnx  # noqa: E402,F401  (fixtures)
 
 REPO = Path(__file__).resolve().parents[2]
@@ -26,8 +26,8 @@ def test_runs_with_torch_absent(small_onnx, tmp_path):
 import sys
 sys.modules['torch'] = None
 import numpy as np
-from simcam.noise.onnx_sampler import OnnxNoiseFlow
-s = OnnxNoiseFlow({str(small_onnx[0])!r}, threads=1)
+from simcam.noise.onnx_sampler import NoiseFlowRuntime
+s = NoiseFlowRuntime({str(small_onnx[0])!r}, threads=1)
 rng = np.random.default_rng(0)
 clean = rng.random((1, 4, 8, 8), dtype=np.float32)
 x = s.sample(clean, iso=300.0, camera='B', rng=rng)
@@ -50,7 +50,7 @@ np.save({str(out)!r}, x)
 
 
 def test_same_seed_same_bytes(small_onnx):
-    s = OnnxNoiseFlow(small_onnx[0], threads=1)
+    s = NoiseFlowRuntime(small_onnx[0], threads=1)
     clean = np.full((2, 4, 6, 6), 0.3, np.float32)
     a = s.sample(clean, iso=400.0, camera="A", rng=np.random.default_rng(5))
     b = s.sample(clean, iso=400.0, camera="A", rng=np.random.default_rng(5))
@@ -60,7 +60,7 @@ def test_same_seed_same_bytes(small_onnx):
 def test_sample_mosaic_round_trips_packing(small_onnx):
     from simcam.cfa import pack
 
-    s = OnnxNoiseFlow(small_onnx[0], threads=1)
+    s = NoiseFlowRuntime(small_onnx[0], threads=1)
     rng = np.random.default_rng(1)
     mosaic = rng.random((12, 10), dtype=np.float32)
     noise = s.sample_mosaic(mosaic, iso=100.0, camera=0, rng=np.random.default_rng(2))
@@ -94,7 +94,7 @@ CLEAN = np.full((2, 4, 8, 8), 0.2, np.float32)
     ],
 )
 def test_bad_input_one_line(small_onnx, call, match):
-    s = OnnxNoiseFlow(small_onnx[0], threads=1)
+    s = NoiseFlowRuntime(small_onnx[0], threads=1)
     with pytest.raises(NoiseModelError, match=match) as info:
         call(s)
     assert "\n" not in str(info.value)
@@ -110,16 +110,16 @@ def test_onnx_without_simcam_metadata(tmp_path):
     path = tmp_path / "plain.onnx"
     onnx.save(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)], ir_version=8), str(path))
     with pytest.raises(NoiseModelError, match=r"plain.onnx: metadata_props: missing 'simcam_format'"):
-        OnnxNoiseFlow(path)
+        NoiseFlowRuntime(path)
 
 
 def test_missing_and_garbage_files(tmp_path):
     with pytest.raises(NoiseModelError, match="ONNX file not found"):
-        OnnxNoiseFlow(tmp_path / "nope.onnx")
+        NoiseFlowRuntime(tmp_path / "nope.onnx")
     bad = tmp_path / "bad.onnx"
     bad.write_bytes(b"not a model")
     with pytest.raises(NoiseModelError, match="bad.onnx: not a loadable ONNX model"):
-        OnnxNoiseFlow(bad)
+        NoiseFlowRuntime(bad)
 
 
 def test_loglik_file_must_be_the_likelihood_graph(small_onnx, tmp_path):
@@ -127,6 +127,6 @@ def test_loglik_file_must_be_the_likelihood_graph(small_onnx, tmp_path):
 
     shutil.copy(small_onnx[0], tmp_path / "m.onnx")
     shutil.copy(small_onnx[0], tmp_path / "m.loglik.onnx")  # wrong graph under the loglik name
-    s = OnnxNoiseFlow(tmp_path / "m.onnx")
+    s = NoiseFlowRuntime(tmp_path / "m.onnx")
     with pytest.raises(NoiseModelError, match="simcam_role: 'sampler', expected 'loglik'"):
         s.log_prob(CLEAN, clean=CLEAN, iso=400.0, camera=0)

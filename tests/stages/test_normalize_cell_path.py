@@ -7,7 +7,8 @@ import pytest
 
 from simcam.errors import MetadataError
 from simcam.frame import CameraMeta, RawFrame
-from simcam.stages.raw import Normalize, black_level_cell, black_level_map
+from simcam.raw import black_level_cell, black_level_map
+from simcam.stages.raw import Normalize
 
 
 def reference(frame: RawFrame) -> np.ndarray:

@@ -10,7 +10,7 @@ from torch_cases import MODEL_CASES, NLF4, PG4
 from simcam.cfa import pack, unpack
 from simcam.errors import NoiseModelError, SimcamError
 from simcam.noise import NoiseCondition, model_from_entry
-from simcam.profiles import load_profile, profile_from_dict
+from simcam.profiles.schema import load_profile, profile_from_dict
 from simcam.torch import AddNoise, add_noise, log_prob, to_mosaic, to_packed
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -117,17 +117,11 @@ def register_effect(cls: type[Effect]) -> type[Effect]:
     return cls
 
 
-def _load() -> None:
-    from . import adc, correlation, dark, defects, empirical, fixed_pattern, response, temporal  # noqa: F401
-
-
 def effect_types() -> dict[str, type[Effect]]:
-    _load()
     return dict(_EFFECTS)
 
 
 def effect_from_entry(entry: Any, *, where: str = "effect") -> Effect:
-    _load()
     return from_registry(entry, _EFFECTS, base=Effect, noun="effect", expected=list(EFFECT_NAMES), where=where)
 
 

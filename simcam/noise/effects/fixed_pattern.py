@@ -1,7 +1,7 @@
 """Fixed-pattern effects (drawn once per sensor seed): ``column_fpn``, ``dsnu``, ``prnu``, ``black_level_offset``.
 
 Units: normalised raw (offsets), dimensionless (gains). References: EMVA 1288
-release 4.0, sections on DSNU and PRNU (spatial non-uniformities); seed ch. 2.
+release 4.0, sections on DSNU and PRNU (spatial non-uniformities); Abdelhamed 2020, ch. 2.
 """
 
 from __future__ import annotations

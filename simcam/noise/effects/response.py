@@ -7,7 +7,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, field_validator
 
-from ..base import SiteParam, site_values, validate_site_param
+from ..base import SiteParam, validate_positive_site_param
 from .base import Effect, register_effect, site_array
 
 
@@ -23,10 +23,7 @@ class ChannelGain(Effect):
     @field_validator("gain")
     @classmethod
     def _chk(cls, v):
-        validate_site_param(v, "gain")
-        if (site_values(v, name="gain") <= 0).any():
-            raise ValueError(f"gain must be > 0, got {v!r}")
-        return v
+        return validate_positive_site_param(v, "gain")
 
     def apply(self, x, ctx):
         x *= site_array(self.gain, x.shape, name="gain")

@@ -1,4 +1,4 @@
-"""Noise Flow (seed ch. 6; Abdelhamed et al., ICCV 2019, doi:10.1109/ICCV.2019.00326).
+"""Noise Flow (Abdelhamed 2020, ch. 6; Abdelhamed et al., ICCV 2019, doi:10.1109/ICCV.2019.00326).
 
 A normalising flow p(noise | clean, ISO, camera) on packed raw patches
 (NCHW, channels in :data:`simcam.cfa.PACK_OFFSETS` order). Needs the ``torch``

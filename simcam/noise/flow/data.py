@@ -6,7 +6,7 @@ normalised raw), ``noise`` float32 [N, 4, h, w] (noisy - clean), ``iso`` float64
 ``camera`` [N] (str). Sources: a ``.npz`` with those keys (``noisy`` may replace
 ``noise``), a folder of SIDD-style ``.MAT`` pairs, DNG bursts with a ground truth
 (``clean.dng`` or ``gt.npz``), or pairs synthesised from an NLF
-table (seed eq. 3.8: ``var = beta1 * clean + beta2``).
+table (Abdelhamed 2020, eq. 3.8: ``var = beta1 * clean + beta2``).
 """
 
 from __future__ import annotations
@@ -186,23 +186,14 @@ _SIDD_DIR = re.compile(r"^\d{4}_\d{3}_([A-Z0-9]{2})_(\d{5})_\d+_\d+_[A-Z]$")
 
 
 def _read_mat(path: Path) -> np.ndarray:
-    """First array of a SIDD .MAT (v7.3/HDF5 via h5py, else scipy.io)."""
-    try:
-        import h5py
+    """The SIDD raw image of a .MAT (variable ``x``, else the first one) as float32."""
+    from ...io.matlab import load_mat
 
-        with h5py.File(path, "r") as f:
-            key = "x" if "x" in f else next(k for k in f.keys() if not k.startswith("#"))
-            return np.asarray(f[key], dtype=np.float32).T  # MATLAB is column-major
-    except (OSError, StopIteration):
-        pass
-    try:
-        from scipy.io import loadmat
-
-        m = loadmat(path)
-        key = "x" if "x" in m else next(k for k in m if not k.startswith("__"))
-        return np.asarray(m[key], dtype=np.float32)
-    except Exception as exc:  # noqa: BLE001
-        raise DatasetError(f"{path}: cannot read as a MATLAB file ({exc})") from None
+    variables = load_mat(path, DatasetError)
+    key = "x" if "x" in variables else next(iter(variables), None)
+    if key is None:
+        raise DatasetError(f"{path}: no variables; expected a SIDD raw image")
+    return np.asarray(variables[key], dtype=np.float32)
 
 
 def _add_patches(parts: dict, noisy: np.ndarray, gt: np.ndarray, rng: np.random.Generator, count: int,
@@ -229,7 +220,7 @@ def load_sidd_pairs(root, *, patches_per_image: int = 64, size: int = 32, seed: 
     """Patch set from SIDD-style folders ``SSSS_III_CC_IIIII_...`` holding
     ``*NOISY_RAW_*.MAT`` and ``*GT_RAW_*.MAT`` (normalised raw mosaics).
 
-    Camera and ISO come from the folder name (seed ch. 5.2); patches of
+    Camera and ISO come from the folder name (Abdelhamed 2020, ch. 5.2); patches of
     ``2*size`` x ``2*size`` mosaic pixels at even offsets are packed by position
     (:data:`simcam.cfa.PACK_OFFSETS`). Noise is ``clip(noisy,0,1) - clip(clean,0,1)``
     as in the Noise Flow code.
@@ -249,16 +240,26 @@ def load_sidd_pairs(root, *, patches_per_image: int = 64, size: int = 32, seed: 
             noisy, gt = _read_mat(nf), _read_mat(gf)
             if noisy.shape != gt.shape or noisy.ndim != 2:
                 raise DatasetError(f"{nf}: shape {noisy.shape} vs ground truth {gt.shape}; expected equal 2-D mosaics")
-            rng = np.random.default_rng(np.random.SeedSequence([seed, d_i, f_i]))
-            _add_patches(parts, noisy, gt, rng, patches_per_image, size, where=str(nf))
-            parts["iso"].append(np.full(patches_per_image, float(iso)))
-            parts["camera"].append(np.full(patches_per_image, cam))
+            _add_pair(parts, noisy, gt, [seed, d_i, f_i], patches_per_image, size, float(iso), cam, where=str(nf))
+    return _patch_set(parts, f"{root}: no *NOISY_RAW_*.MAT files in the SIDD folders")
+
+
+def _add_pair(parts: dict, noisy, gt, seed_key: list[int], n: int, size: int, iso: float, camera: str, *, where: str):
+    """``n`` patches of one noisy/clean pair, drawn from ``SeedSequence(seed_key)``, with their ISO and camera."""
+    rng = np.random.default_rng(np.random.SeedSequence(seed_key))
+    _add_patches(parts, noisy, gt, rng, n, size, where=where)
+    parts["iso"].append(np.full(n, iso))
+    parts["camera"].append(np.full(n, camera))
+
+
+def _patch_set(parts: dict, empty: str, **where) -> dict:
+    """The collected patches as one checked set; DatasetError ``empty`` when there are none."""
     if not parts["clean"]:
-        raise DatasetError(f"{root}: no *NOISY_RAW_*.MAT files in the SIDD folders")
+        raise DatasetError(empty)
     return check_patch_set({
         "clean": np.stack(parts["clean"]), "noise": np.stack(parts["noise"]),
         "iso": np.concatenate(parts["iso"]), "camera": np.concatenate(parts["camera"]),
-    })
+    }, **where)
 
 
 def load_dng_bursts(root, *, patches_per_image: int = 64, size: int = 32, seed: int = 0) -> dict:
@@ -272,10 +273,10 @@ def load_dng_bursts(root, *, patches_per_image: int = 64, size: int = 32, seed: 
     EXIF tags, camera from ``UniqueCameraModel`` (else Make Model).
     """
     from ...io.dng import read_dng
-    from ...stages.raw import Normalize
+    from ...io.normalized import read_normalized
+    from ...raw import normalize
 
     root = Path(root)
-    norm = Normalize()
     dirs = sorted({p.parent for p in root.rglob("*.dng")} | ({root} if any(root.glob("*.dng")) else set()))
     parts = {k: [] for k in KEYS}
     for d_i, d in enumerate(dirs):
@@ -283,7 +284,7 @@ def load_dng_bursts(root, *, patches_per_image: int = 64, size: int = 32, seed: 
         if not frames:
             continue
         if (d / "clean.dng").is_file():
-            gt = norm.apply(read_dng(d / "clean.dng")).data
+            gt = read_normalized(d / "clean.dng").data
         elif (d / "gt.npz").is_file():
             with np.load(d / "gt.npz") as z:
                 if "gt" not in z:
@@ -295,20 +296,13 @@ def load_dng_bursts(root, *, patches_per_image: int = 64, size: int = 32, seed: 
             frame = read_dng(f)
             if frame.meta.iso is None:
                 raise DatasetError(f"{f}: ISO: missing from the tags; expected the capture's ISO")
-            noisy = norm.apply(frame).data
+            noisy = normalize(frame).data
             if noisy.shape != gt.shape:
                 raise DatasetError(f"{f}: shape {noisy.shape} differs from its ground truth {gt.shape}")
             camera = frame.meta.unique_camera_model or f"{frame.meta.make} {frame.meta.model}".strip()
-            rng = np.random.default_rng(np.random.SeedSequence([seed, d_i, f_i]))
-            _add_patches(parts, noisy, gt, rng, patches_per_image, size, where=str(f))
-            parts["iso"].append(np.full(patches_per_image, float(frame.meta.iso)))
-            parts["camera"].append(np.full(patches_per_image, camera))
-    if not parts["clean"]:
-        raise DatasetError(f"{root}: no DNG bursts (folders of *.dng frames with clean.dng or gt.npz)")
-    return check_patch_set({
-        "clean": np.stack(parts["clean"]), "noise": np.stack(parts["noise"]),
-        "iso": np.concatenate(parts["iso"]), "camera": np.concatenate(parts["camera"]),
-    }, where=str(root))
+            _add_pair(parts, noisy, gt, [seed, d_i, f_i], patches_per_image, size, float(frame.meta.iso), camera,
+                      where=str(f))
+    return _patch_set(parts, f"{root}: no DNG bursts (folders of *.dng frames with clean.dng or gt.npz)", where=str(root))
 
 
 def load_data(path, **kw) -> dict:

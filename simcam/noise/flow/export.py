@@ -16,11 +16,20 @@ import json
 import warnings
 from pathlib import Path
 
-from ... import __version__
 from ...errors import NoiseModelError, require_extra
 from ..onnx_sampler import FORMAT, PACKING, loglik_path
 from . import layers as L
 from .model import NoiseFlow, log_normal
+
+
+def _simcam_version() -> str:
+    """The installed simcam version (written into the ONNX metadata)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("simcam")
+    except PackageNotFoundError:  # a source tree that is not installed
+        return "0+unknown"
 
 torch = require_extra("torch", "torch")
 
@@ -57,7 +66,7 @@ def metadata(flow: NoiseFlow, *, role: str, source: str) -> dict[str, str]:
     cfg = flow.config
     return {
         "simcam_format": FORMAT,
-        "simcam_version": __version__,
+        "simcam_version": _simcam_version(),
         "simcam_role": role,
         "packing_order": PACKING,
         "iso_min": repr(float(cfg.iso_range[0])),
@@ -89,7 +98,7 @@ def _export_one(module, args, names_in, names_out, path, meta):
         entry = model.metadata_props.add()
         entry.key, entry.value = k, v
     model.producer_name = "simcam"
-    model.producer_version = __version__
+    model.producer_version = _simcam_version()
     onnx.checker.check_model(model)
     onnx.save(model, str(path))
 

@@ -1,4 +1,4 @@
-"""Noise Flow bijective layers (seed ch. 6.3; Kingma & Dhariwal, Glow, arXiv:1807.03039).
+"""Noise Flow bijective layers (Abdelhamed 2020, ch. 6.3; Kingma & Dhariwal, Glow, arXiv:1807.03039).
 
 Every layer maps noise-side tensors ``h`` (float, NCHW, C = 4) to latent-side
 tensors with ``to_latent(h, cond) -> (h', logdet)``, ``logdet`` of shape (B,)
@@ -120,7 +120,7 @@ class SignalDependentPublished(_SignalDependent):
 
 
 class SignalDependentNLF(_SignalDependent):
-    """Signal-dependent layer of the paper (seed eq. 6.10): ``s = sqrt(beta1 I + beta2)``.
+    """Signal-dependent layer of the paper (Abdelhamed 2020, eq. 6.10): ``s = sqrt(beta1 I + beta2)``.
 
     ``beta1 = exp(b1)``, ``beta2 = exp(b2)`` (initialised ``b1 = -5``, ``b2 = 0``).
     With ``per_iso=True`` (simcam's extension) ``b1``, ``b2`` are per camera and
@@ -164,7 +164,7 @@ class GainScalar(nn.Module):
 
 
 class GainIsoCamera(nn.Module):
-    """Gain layer of the paper (seed eq. 6.12-6.14): ``gamma = psi_m * exp(v(ISO)) * ISO``.
+    """Gain layer of the paper (Abdelhamed 2020, eq. 6.12-6.14): ``gamma = psi_m * exp(v(ISO)) * ISO``.
 
     ``v`` is per ISO knot (interpolated in log-ISO, initialised so ``exp(v) = 1/200``),
     ``psi_m = exp(log_psi[m])`` per camera. Noise -> latent divides by ``gamma``;

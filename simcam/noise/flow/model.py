@@ -1,4 +1,4 @@
-"""The Noise Flow composite: S-Ax4-G-Ax4 (seed fig. 6.2, ch. 6.3).
+"""The Noise Flow composite: S-Ax4-G-Ax4 (Abdelhamed 2020, fig. 6.2, ch. 6.3).
 
 Noise -> latent order: signal-dependent layer, four (1x1 conv, coupling) steps,
 gain layer, four more steps. Tensors are NCHW with channels in
@@ -32,7 +32,7 @@ class FlowConfig:
     ----------
     arch : {"published", "paper"}
         ``published``: the released code (ISO and camera in the signal-dependent
-        layer, scalar gain layer). ``paper``: seed eq. 6.10-6.14 (global beta1, beta2;
+        layer, scalar gain layer). ``paper``: Abdelhamed 2020, eq. 6.10-6.14 (global beta1, beta2;
         per-ISO and per-camera gain in the gain layer).
     cameras : list of str
         Camera names; the ``camera`` input is an index into this list.

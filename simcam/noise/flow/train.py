@@ -1,6 +1,6 @@
-"""Noise Flow training: maximum likelihood with Adam (seed ch. 6.4).
+"""Noise Flow training: maximum likelihood with Adam (Abdelhamed 2020, ch. 6.4).
 
-Adam, lr 1e-3, betas (0.9, 0.999) as in the seed; 32x32 packed patches; a
+Adam, lr 1e-3, betas (0.9, 0.999) as in Abdelhamed 2020; 32x32 packed patches; a
 train/test split with every (camera, ISO) in both; per-epoch test NLL per
 dimension (nats) and marginal KL (:func:`simcam.noise.metrics.marginal_kl`) written to
 ``metrics.csv`` and ``metrics.png``; checkpoints ``last.pt`` (with optimizer state,
