@@ -451,7 +451,8 @@ def read_emva1288(descriptor: str | Path, *, region=None, progress: bool | None 
             if tag == "n":
                 bits, width, height = int(parts[1]), int(parts[2]), int(parts[3])
             elif tag == "b":
-                blocks.append({"kind": "flat", "exp_ns": float(parts[1].replace(",", ".")), "photons": float(parts[2].replace(",", ".")), "files": []})
+                blocks.append({"kind": "flat", "exp_ns": float(parts[1].replace(",", ".")),
+                               "photons": float(parts[2].replace(",", ".")), "files": []})
             elif tag == "d":
                 blocks.append({"kind": "dark", "exp_ns": float(parts[1].replace(",", ".")), "photons": 0.0, "files": []})
             elif tag == "i":

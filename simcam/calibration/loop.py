@@ -384,7 +384,8 @@ class Loop:
             accepted = bool(diag_better and kl_ok and not null_fit)
             rec = {
                 "effect": effect, "parameters": {k: v for k, v in cand.effects[effect].items()},
-                "diagnostic": chosen.name, "discrepancy_before": chosen.z, "discrepancy_after": None if after is None else after.z,
+                "diagnostic": chosen.name, "discrepancy_before": chosen.z,
+                "discrepancy_after": None if after is None else after.z,
                 "p_before": chosen.p, "p_after": None if after is None else after.p,
                 "heldout": {"kl_before": held_before["kl"], "kl_after": held_after["kl"],
                             "kl_excess_before": held_before["kl_excess"], "kl_excess_after": held_after["kl_excess"],

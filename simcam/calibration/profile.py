@@ -1,7 +1,8 @@
 """The loop's fitted models as a calibration profile of simcam's noise stage (``simcam.profiles``, schema 1).
 
 Each ISO becomes a ``composite`` entry: a ``poisson_gaussian`` base on normalised raw
-(beta1 = K / (white - black), beta2 = read^2 / (white - black)^2, Abdelhamed, PhD dissertation, York University, 2020, eq. 3.6) and the effects
+(beta1 = K / (white - black), beta2 = read^2 / (white - black)^2, Abdelhamed, PhD dissertation, York University,
+2020, eq. 3.6) and the effects
 in the noise stage's parameterisation (normalised raw offsets, dimensionless gains), in signal-chain
 order: signal effects (prnu, frame_flicker), then readout effects: heavy-tailed read noise,
 crosstalk (on shot + read noise), row and periodic noise, the response (nonlinearity, on the noisy

@@ -18,14 +18,14 @@ from ..errors import ProfileError
 from . import diagnostics as dg
 from .heldout import KL_BINNING, KL_EDGES
 from .effects import ctx_like
-from .loop import LoopConfig, GroupResult
 from .heldout import FAMILIES, GATE_Z, STRUCTURED_BINNING
+from .loop import GroupResult, LoopConfig
+from .model import LoopModel
+from .simulate import simulate_capture
 
 STRUCTURED_KL = (f"sum over the families {', '.join(FAMILIES)} of the held-out noise (per sequence and CFA plane) of "
                  f"their KL minus its sampling floor, counted where it exceeds {GATE_Z:g} sampling SDs; binning: "
                  f"{STRUCTURED_BINNING}")
-from .model import LoopModel
-from .simulate import simulate_capture
 
 REPORT_SCHEMA = "simcam-loop-report/1"
 PROFILE_SCHEMA = 1
@@ -144,7 +144,8 @@ def build_report(results: list[GroupResult], capture, cfg: LoopConfig, emva: dic
         "settings": {"replicates": cfg.replicates, "heldout_replicates": cfg.heldout_replicates,
                      "alpha": cfg.alpha, "correction": "Holm step-down over the applicable diagnostics",
                      "test": "two-sided Student t (R-1 dof) on the standardised discrepancy",
-                     "max_size": cfg.max_size, "max_pixels": cfg.max_pixels, "tile": cfg.tile, "seed": cfg.seed, "max_iterations": cfg.max_iterations,
+                     "max_size": cfg.max_size, "max_pixels": cfg.max_pixels, "tile": cfg.tile, "seed": cfg.seed,
+                     "max_iterations": cfg.max_iterations,
                      "simulator": "simcam.noise composite (the profile.yaml entry), Composite.sample_frames"},
         "kl_binning": KL_BINNING,
         "structured_kl": STRUCTURED_KL,
@@ -477,7 +478,8 @@ def _family_table(h: dict) -> str:
 def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
     parts = ["<!doctype html><html><head><meta charset='utf-8'><title>simcam loop report</title>",
              "<style>body{font-family:sans-serif;margin:2em;max-width:1200px} table{border-collapse:collapse;"
-             "font-size:13px;display:block;overflow-x:auto;max-width:100%} td,th{border:1px solid #bbb;padding:3px 6px;text-align:right} th{background:#eee}"
+             "font-size:13px;display:block;overflow-x:auto;max-width:100%} "
+             "td,th{border:1px solid #bbb;padding:3px 6px;text-align:right} th{background:#eee}"
              " td.l{text-align:left} .sig{background:#fdd}</style></head><body>",
              f"<h1>simcam loop report</h1><p>Capture set <code>{html.escape(doc['capture_set'])}</code> "
              f"({doc['layout']}). Significance: {doc['settings']['correction']} at alpha = {doc['settings']['alpha']}"

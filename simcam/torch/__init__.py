@@ -21,5 +21,5 @@ from .effects import EFFECTS, EFFECTS_NOT_SUPPORTED
 from .layout import to_mosaic, to_packed
 from .logprob import log_prob
 
-__all__ = ["AddNoise", "EFFECTS", "EFFECTS_NOT_SUPPORTED", "NOT_SUPPORTED", "SAMPLERS", "add_noise", "flow_noise", "log_prob", "to_mosaic",
-           "to_packed"]
+__all__ = ["AddNoise", "EFFECTS", "EFFECTS_NOT_SUPPORTED", "NOT_SUPPORTED", "SAMPLERS", "add_noise", "flow_noise", "log_prob",
+           "to_mosaic", "to_packed"]

@@ -20,7 +20,7 @@ import torch
 
 from ..errors import NoiseModelError
 from .context import Ctx, sites
-from .group import Group, group_models, resolve_models
+from .group import group_models, resolve_models
 from .layout import MOSAIC, PACKED, layout_of, site_tensor, to_mosaic, to_packed
 
 _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)

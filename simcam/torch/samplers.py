@@ -91,7 +91,8 @@ def poisson_scaled(clean: torch.Tensor, scale: torch.Tensor, beta2: torch.Tensor
 
 def _pg_host(group: Group, clean: torch.Tensor, ctx: Ctx) -> torch.Tensor:
     """CPU float32 fast path: simcam's own exact sampler (alias tables, compiled kernel) through the public
-    ``NoiseModel.sample_stack``, its numpy generator started from a draw of ``ctx.generator`` (so still deterministic given it)."""
+    ``NoiseModel.sample_stack``, its numpy generator started from a draw of ``ctx.generator`` (so still deterministic
+    given it)."""
     import numpy as np
 
     from ..noise import NoiseCondition
