@@ -1,0 +1,148 @@
+"""Render a frame through a pipeline straight to output samples, fusing the display tail.
+
+:func:`render_samples` runs the pipeline's stages one by one, except its tail
+when that tail is made only of
+
+* linear maps: ``camera_to_xyz``, ``xyz_to_srgb``, ``tone`` with ``curve: none``
+  (a gain ``2^exposure``), which compose into one 3 x 3 matrix;
+* then ``clip`` stages (their bounds intersect);
+* then at most one ``gamma`` with ``curve: srgb``;
+* then at most one ``orientation``.
+
+That tail runs as one parallel pass (:func:`simcam.colour.display_kernel.encode_display`)
+writing the output samples directly; orientation is then a view of them.
+The samples equal the stage-by-stage render's quantised output within one
+code (the transfer curve is read from a table; the matrices are multiplied
+together first). Pipelines with any other tail run stage by stage, and the
+samples come from :func:`simcam.io.images.to_samples`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .frame import RawFrame
+
+_LINEAR = ("camera_to_xyz", "xyz_to_srgb", "tone")
+
+
+@dataclass
+class Rendered:
+    """Output samples and the frame they came from (``frame.data`` is not filled for a fused tail).
+
+    ``kind`` is the signal kind of the samples, ``meta`` the metadata after the last stage.
+    """
+
+    samples: np.ndarray
+    kind: str
+    meta: object
+    depth: str
+
+
+def fusable_tail(stages) -> int:
+    """Index of the first stage of the fusable display tail of ``stages`` (``len(stages)`` if none)."""
+    n = len(stages)
+    i = n
+    if i and stages[i - 1].type == "orientation":
+        i -= 1
+    if i and stages[i - 1].type == "gamma" and stages[i - 1].params.curve == "srgb":
+        i -= 1
+    while i and stages[i - 1].type == "clip":
+        i -= 1
+    k = i
+    while k and _is_linear(stages[k - 1]):
+        k -= 1
+    if k == i:  # no matrix: nothing worth fusing
+        return n
+    return k
+
+
+def _is_linear(stage) -> bool:
+    if stage.type not in _LINEAR:
+        return False
+    return stage.type != "tone" or stage.params.curve == "none"
+
+
+def render_samples(pipe, frame: RawFrame, depth: str, *, seed: int | None = None, fuse: bool = True) -> Rendered:
+    """Run ``pipe`` on ``frame`` and return ``depth`` samples (``uint8``, ``uint16``, ``float32``, ``half``).
+
+    Parameters
+    ----------
+    pipe : simcam.pipeline.Pipeline
+        The pipeline; its random stages draw as in ``pipe(frame, seed=seed)``.
+    frame : RawFrame
+        Input frame of the pipeline's input kind.
+    depth : str
+        Output sample type.
+    seed : int, optional
+        Seed for random stages.
+    fuse : bool
+        Fuse the display tail (see the module docstring); False runs every stage.
+
+    Returns
+    -------
+    Rendered
+    """
+    from .io.images import to_samples
+
+    stages = pipe.stages
+    start = fusable_tail(stages) if fuse and frame.kind == pipe.input_kind else len(stages)
+    if start == len(stages):
+        out = pipe(frame, seed=seed)
+        return Rendered(to_samples(out.data, depth), out.kind, out.meta, depth)
+    head = _head(pipe, start)
+    frame = head(frame, seed=seed) if head is not None else frame
+    return _run_tail(stages[start:], frame, depth)
+
+
+def _head(pipe, start: int):
+    """The pipeline of ``stages[:start]``; it draws the same random numbers as the whole pipeline
+    (``SeedSequence.spawn`` gives child k the same state whatever the number of children)."""
+    if start == 0:
+        return None
+    from .pipeline import Pipeline
+
+    return Pipeline(pipe.stages[:start], input_kind=pipe.input_kind, name=pipe.name, source=pipe.source)
+
+
+def _run_tail(tail, frame: RawFrame, depth: str) -> Rendered:
+    from .colour.display import sidd_xyz_to_srgb_matrix, xyz_d50_to_linear_srgb_matrix
+    from .colour.display_kernel import encode_display
+    from .errors import ImageIOError
+    from .stages.orientation import orient
+
+    m = np.eye(3)
+    lo, hi = -np.inf, np.inf
+    curve, kind, meta, orientation = "linear", frame.kind, frame.meta, None
+    for st in tail:
+        t = st.type
+        if t == "camera_to_xyz":
+            m = st.matrix(meta) @ m
+            kind = "xyz"
+        elif t == "xyz_to_srgb":
+            s = sidd_xyz_to_srgb_matrix() if st.params.mode == "sidd" else xyz_d50_to_linear_srgb_matrix()
+            m = s @ m
+            kind = "linear_srgb"
+        elif t == "tone":
+            m = (2.0 ** st.params.exposure) * m
+        elif t == "clip":  # clip[l2, h2] after clip[lo, hi] is clip[clip(lo, l2, h2), clip(hi, l2, h2)]
+            l2 = -np.inf if st.params.low is None else st.params.low
+            h2 = np.inf if st.params.high is None else st.params.high
+            lo, hi = float(np.clip(lo, l2, h2)), float(np.clip(hi, l2, h2))
+        elif t == "gamma":
+            curve, kind = "srgb", "display"
+        elif t == "orientation":
+            orientation = st
+    try:
+        samples = encode_display(frame.data, m, lo=None if np.isinf(lo) else lo, hi=None if np.isinf(hi) else hi,
+                                 curve=curve, depth=depth)
+    except ValueError as exc:
+        raise ImageIOError(f"{meta.source or 'frame'}: {exc}") from None
+    if orientation is not None:
+        value = orientation.transform_value(meta)
+        samples = np.ascontiguousarray(orient(samples, value))
+        meta = meta.copy()
+        meta.orientation = 1
+    return Rendered(samples, kind, meta, depth)

@@ -1,0 +1,122 @@
+"""The fused display tail (simcam.render, simcam.colour.display_kernel) against references:
+the IEC 61966-2-1 curve in float64 (closed form) on random data, and the stage-by-stage
+render quantised with numpy on the bundled example and the shared DNGs (at most one code apart)."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import pytest
+
+from conftest import REPO, shared_path
+from simcam.colour.display_kernel import encode_display, quantise
+from simcam.io.dng import read_dng
+from simcam.pipeline import Pipeline
+from simcam.render import fusable_tail, render_samples
+
+EXAMPLE = REPO / "examples" / "data" / "chart.dng"
+SHARED_DNGS = ["gopro_hero7_iso252", "canon_550d_colorchecker"]
+
+
+def srgb64(x):
+    x = np.asarray(x, np.float64)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.abs(x) ** (1 / 2.4) - 0.055)
+
+
+def _random(seed=0, shape=(301, 257, 3)):
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-0.1, 1.3, shape).astype(np.float32)
+    n = min(40, shape[1])
+    x[0, :n, 0] = np.linspace(0, 0.004, n, dtype=np.float32)  # around the linear/power joint
+    return x
+
+
+M = np.array([[1.3, -0.2, -0.1], [-0.1, 1.2, -0.1], [0.05, -0.25, 1.2]])
+
+
+@pytest.mark.parametrize("depth", ["uint8", "uint16"])
+def test_encode_display_within_one_code_of_the_curve(depth):
+    x = _random()
+    top = 255 if depth == "uint8" else 65535
+    out = encode_display(x, M, lo=0.0, hi=1.0, depth=depth)
+    lin = np.clip(x.astype(np.float64) @ M.T, 0, 1)
+    exact = srgb64(lin) * top
+    assert out.dtype == depth
+    assert np.abs(out - exact).max() <= 0.5 + 1.0  # rounding plus at most one code
+    # one code only where the exact value lies next to a code boundary
+    off = out != np.round(exact)
+    assert off.mean() < (1e-3 if depth == "uint8" else 1e-2)
+    assert np.all(np.abs(exact[off] - np.floor(exact[off]) - 0.5) < (2e-3 if depth == "uint8" else 0.05))
+
+
+def test_encode_display_float_and_linear():
+    x = _random(1)
+    y = encode_display(x, M, lo=None, hi=None, depth="float32")
+    lin = x.astype(np.float64) @ M.T
+    ref = np.where(lin < 0, 12.92 * lin, srgb64(np.maximum(lin, 0)))
+    np.testing.assert_allclose(y, ref, atol=2e-6, rtol=2e-6)
+    q = encode_display(x, M, lo=0.0, hi=None, curve="linear", depth="uint16")
+    assert np.abs(q - np.clip(lin, 0, 1) * 65535).max() <= 0.5 + 0.02
+
+
+def test_encode_display_same_bytes_for_any_thread_count():
+    x = _random(2, (513, 129, 3))
+    n = numba.get_num_threads()
+    try:
+        outs = []
+        for t in sorted({1, n}):
+            numba.set_num_threads(t)
+            outs.append(encode_display(x, M, lo=0.0, hi=1.0, depth="uint8").tobytes())
+    finally:
+        numba.set_num_threads(n)
+    assert all(o == outs[0] for o in outs)
+
+
+def test_encode_display_rejects_nan():
+    x = _random(3, (4, 5, 3))
+    x[2, 3, 1] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        encode_display(x, M, depth="uint8")
+
+
+def test_quantise_matches_numpy():
+    x = _random(4).reshape(-1)
+    for depth, top in (("uint8", 255), ("uint16", 65535)):
+        assert np.array_equal(quantise(x, depth), np.round(np.clip(x, 0, 1) * np.float32(top)).astype(depth))
+
+
+def test_fusable_tail_of_builtin_pipelines():
+    srgb = Pipeline.from_yaml("srgb")
+    types = [s.type for s in srgb.stages[fusable_tail(srgb.stages):]]
+    assert types == ["camera_to_xyz", "xyz_to_srgb", "tone", "clip", "gamma", "orientation"]
+    filmic = srgb.with_overrides({"tone.curve": "filmic"})
+    assert [s.type for s in filmic.stages[fusable_tail(filmic.stages):]] == []
+    sidd = Pipeline.from_yaml("sidd-srgb")  # power gamma + smoothstep: not fused
+    assert fusable_tail(sidd.stages) == len(sidd.stages)
+
+
+def _check_pipeline_on(frame, name, overrides=None):
+    pipe = Pipeline.from_yaml(name)
+    if overrides:
+        pipe = pipe.with_overrides(overrides)
+    for depth in ("uint8", "uint16"):
+        fused = render_samples(pipe, frame, depth)
+        ref_frame = pipe(frame)
+        top = 255 if depth == "uint8" else 65535
+        ref = np.round(np.clip(ref_frame.data, 0, 1) * top)
+        assert fused.samples.shape == ref.shape and fused.kind == ref_frame.kind
+        assert np.abs(fused.samples - ref).max() <= 1
+        assert (fused.samples != ref).mean() < 1e-2
+
+
+@pytest.mark.parametrize("name,overrides", [("srgb", None), ("linear-srgb", None),
+                                            ("srgb", {"tone.exposure": 0.5, "orientation.value": 6})])
+def test_fused_render_matches_stage_by_stage_on_example(name, overrides):
+    _check_pipeline_on(read_dng(EXAMPLE), name, overrides)
+
+
+@pytest.mark.shared_data
+@pytest.mark.parametrize("dng", SHARED_DNGS)
+def test_fused_render_matches_stage_by_stage_on_shared(dng):
+    frame = read_dng(shared_path(f"dng/{dng}.dng"))
+    _check_pipeline_on(frame, "srgb")
