@@ -36,22 +36,30 @@ def render(
     set_: Optional[list[str]] = typer.Option(None, "--set", help="Override STAGE.PARAM=VALUE (YAML value); repeatable."),
     depth: Optional[str] = typer.Option(None, "--depth", help="8, 16, 32 (float) or half; default by format."),
     seed: int = typer.Option(0, "--seed", help="Seed for random stages (noise)."),
+    quality: int = typer.Option(95, "--quality", help="JPEG quality 1..100."),
+    compression: Optional[str] = typer.Option(
+        None, "--compression", help="TIFF: none (default), zip[:N], lzw; PNG: zip:N (default zip:1); EXR: none (default), zips, piz, ..."),
+    thumbnail: Optional[Path] = typer.Option(None, "--thumbnail", help="Also write a small 8-bit preview (.jpg or .png)."),
 ) -> None:
-    """Render a raw DNG through a pipeline to PNG / TIFF / EXR."""
-    from ..io.images import resolve_depth, write_image
+    """Render a raw DNG through a pipeline to PNG / JPEG / TIFF / EXR (colour-tagged, with the camera's EXIF)."""
+    from ..io.images import resolve_compression, resolve_depth, write_image
     from ..pipeline import Pipeline
+    from ..render import render_samples
 
     overrides = parse_set_options(set_)
-    resolve_depth(output, depth)  # fail on a bad format before any work
+    dtype = resolve_depth(output, depth)  # fail on a bad format before any work
+    resolve_compression(output, compression)
     pipe = Pipeline.from_yaml(pipeline)
     from ..io.dng import read_dng
 
     if overrides:
         pipe = pipe.with_overrides(overrides)
     frame = read_dng(input)
-    out = pipe(frame, seed=seed)
-    write_image(output, out.data, depth=depth, protect=(input,))
-    typer.echo(f"wrote {output} ({out.width}x{out.height}, {out.kind}, pipeline {pipe.name or pipe.source})")
+    out = render_samples(pipe, frame, dtype, seed=seed)
+    write_image(output, out, depth=dtype, protect=(input,), compression=compression, quality=quality,
+                thumbnail=thumbnail)
+    h, w = out.samples.shape[:2]
+    typer.echo(f"wrote {output} ({w}x{h}, {out.kind}, pipeline {pipe.name or pipe.source})")
 
 
 def validate(pipeline: Path = typer.Argument(..., help="Pipeline YAML file.")) -> None:
