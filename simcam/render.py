@@ -94,7 +94,7 @@ def render_samples(pipe, frame: RawFrame, depth: str, *, seed: int | None = None
         return Rendered(to_samples(out.data, depth), out.kind, out.meta, depth)
     head = _head(pipe, start)
     frame = head(frame, seed=seed) if head is not None else frame
-    return _run_tail(stages[start:], frame, depth)
+    return render_tail(stages[start:], frame, depth)
 
 
 def _head(pipe, start: int):
@@ -107,7 +107,8 @@ def _head(pipe, start: int):
     return Pipeline(pipe.stages[:start], input_kind=pipe.input_kind, name=pipe.name, source=pipe.source)
 
 
-def _run_tail(tail, frame: RawFrame, depth: str) -> Rendered:
+def render_tail(tail, frame: RawFrame, depth: str) -> Rendered:
+    """Run a fusable tail (``stages[fusable_tail(stages):]``) on ``frame`` in one pass; ``depth`` samples."""
     from .colour.display import sidd_xyz_to_srgb_matrix, xyz_d50_to_linear_srgb_matrix
     from .colour.display_kernel import encode_display
     from .errors import ImageIOError
