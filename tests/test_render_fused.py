@@ -4,7 +4,6 @@ render quantised with numpy on the bundled example and the shared DNGs (at most 
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 import pytest
 
@@ -45,8 +44,10 @@ def test_encode_display_within_one_code_of_the_curve(depth):
     assert np.abs(out - exact).max() <= 0.5 + 1.0  # rounding plus at most one code
     # one code only where the exact value lies next to a code boundary
     off = out != np.round(exact)
-    assert off.mean() < (1e-3 if depth == "uint8" else 1e-2)
-    assert np.all(np.abs(exact[off] - np.floor(exact[off]) - 0.5) < (2e-3 if depth == "uint8" else 0.05))
+    assert off.mean() < (1e-3 if depth == "uint8" else 3e-2)
+    # the table's error bound: half a step of 2^16 (8-bit) or 2^20 (16-bit) at the steepest slope, 12.92
+    bound = 12.92 * top / (2 * (1 << 16 if depth == "uint8" else 1 << 20))
+    assert np.all(np.abs(exact[off] - np.floor(exact[off]) - 0.5) < bound + 1e-3)
 
 
 def test_encode_display_float_and_linear():
@@ -55,21 +56,21 @@ def test_encode_display_float_and_linear():
     lin = x.astype(np.float64) @ M.T
     ref = np.where(lin < 0, 12.92 * lin, srgb64(np.maximum(lin, 0)))
     np.testing.assert_allclose(y, ref, atol=2e-6, rtol=2e-6)
+    yl = encode_display(x, M, lo=0.0, hi=None, curve="linear", depth="float32")
+    np.testing.assert_allclose(yl, np.maximum(lin, 0), atol=1e-6, rtol=1e-6)
     q = encode_display(x, M, lo=0.0, hi=None, curve="linear", depth="uint16")
     assert np.abs(q - np.clip(lin, 0, 1) * 65535).max() <= 0.5 + 0.02
 
 
-def test_encode_display_same_bytes_for_any_thread_count():
+@pytest.mark.parametrize("depth", ["uint8", "uint16", "float32"])
+def test_encode_display_same_bytes_for_any_thread_count(depth, monkeypatch):
     x = _random(2, (513, 129, 3))
-    n = numba.get_num_threads()
-    try:
-        outs = []
-        for t in sorted({1, n}):
-            numba.set_num_threads(t)
-            outs.append(encode_display(x, M, lo=0.0, hi=1.0, depth="uint8").tobytes())
-    finally:
-        numba.set_num_threads(n)
-    assert all(o == outs[0] for o in outs)
+    outs = []
+    for t in ("1", "2", "5"):
+        monkeypatch.setenv("SIMCAM_THREADS", t)
+        outs.append(encode_display(x, M, lo=0.0, hi=1.0, depth=depth).tobytes())
+        outs.append(quantise(x, "uint16").tobytes())
+    assert outs[0::2] == [outs[0]] * 3 and outs[1::2] == [outs[1]] * 3
 
 
 def test_encode_display_rejects_nan():
@@ -106,7 +107,9 @@ def _check_pipeline_on(frame, name, overrides=None):
         ref = np.round(np.clip(ref_frame.data, 0, 1) * top)
         assert fused.samples.shape == ref.shape and fused.kind == ref_frame.kind
         assert np.abs(fused.samples - ref).max() <= 1
-        assert (fused.samples != ref).mean() < 1e-2
+        # 8-bit: rare one-code differences; 16-bit: the 2^20-step table moves values that lie
+        # within 0.4 code of a rounding boundary (a few per cent), never by more than one code
+        assert (fused.samples != ref).mean() < (1e-2 if depth == "uint8" else 0.1)
 
 
 @pytest.mark.parametrize("name,overrides", [("srgb", None), ("linear-srgb", None),

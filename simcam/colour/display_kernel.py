@@ -1,81 +1,84 @@
-"""Fused display tail: ``3x3 matrix -> clip -> transfer curve -> output samples`` in one parallel pass.
+"""Fused display tail: ``3x3 matrix -> clip -> transfer curve -> output samples`` in one pass over the image.
 
 The stage-by-stage render makes five full-image passes after demosaicking
 (camera -> XYZ, XYZ -> sRGB, clip, sRGB OETF, quantisation), each reading and
-writing 144 MB at 12 MP. :func:`encode_display` does them in one numba loop
-over rows (``prange``; every pixel is computed independently, so the output
-is byte-identical whatever the thread count):
+writing 144 MB at 12 MP. :func:`encode_display` works on bands of
+:data:`BAND_ROWS` rows that stay in cache, on a thread pool (numpy releases the
+GIL in its loops), with no just-in-time compiler to load (a command-line render
+pays no start-up for it). Every pixel is computed independently with the same
+float32 operations, so the output is byte-identical whatever the thread count:
 
-1. ``v = M x`` in float32 (``M`` the product of the stages' matrices);
-2. ``v = min(max(v, lo), hi)`` (the clips; ``lo``/``hi`` may be infinite);
+1. ``v = (M[c, 0] r + M[c, 1] g) + M[c, 2] b`` in float32 (``M`` the product of the
+   stages' matrices);
+2. ``v = clip(v, lo, hi)`` (the clips; composed with [0, 1] for integer output);
 3. the transfer curve: ``srgb`` (IEC 61966-2-1 OETF: ``12.92 v`` for
    ``v <= 0.0031308``, else ``1.055 v^(1/2.4) - 0.055``) or ``linear`` (none);
 4. the output: ``uint8``/``uint16`` samples ``round(clip(y, 0, 1) (2^b - 1))``,
    or float32 / half values.
 
-The ``srgb`` curve interpolates a table of the float64 curve linearly on
-[0, 1] (2^16 intervals; within 1e-6 of the float64 curve, so integer samples
-differ from quantising the exact curve by at most one code, where a value lies
-that close to a code boundary) and uses the exact formula outside [0, 1].
+Integer outputs of the ``srgb`` curve read a table of codes indexed by the
+linear value quantised to ``2^16`` (8-bit) or ``2^20`` (16-bit) steps on
+[0, 1]: the table's code is exact at its grid points and a value is at most half
+a step away, so it differs from quantising the exact curve by at most one code
+(near black, where the curve is steepest, 12.92 x 65535 / 2^21 = 0.4 code; far
+less elsewhere). Float outputs use the exact curve (:func:`simcam.colour.display.srgb_oetf`).
 """
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+from functools import lru_cache
+
 import numpy as np
-from numba import njit, prange
 
-#: linear-value steps of the tables on [0, 1]
-LUT_STEPS = 65535
+#: rows per band (a band of a 4000-wide image is 0.8 MB of float32 input)
+BAND_ROWS = 16
 
-_SRGB_A, _SRGB_T = 0.055, 0.0031308
+_SRGB_T = 0.0031308
 
 
 def srgb_oetf64(x: np.ndarray) -> np.ndarray:
     """The IEC 61966-2-1 OETF in float64 (the tables' source)."""
     x = np.asarray(x, dtype=np.float64)
-    return np.where(x <= _SRGB_T, 12.92 * x, 1.055 * np.power(np.maximum(x, _SRGB_T), 1.0 / 2.4) - _SRGB_A)
+    return np.where(x <= _SRGB_T, 12.92 * x, 1.055 * np.power(np.maximum(x, _SRGB_T), 1.0 / 2.4) - 0.055)
 
 
-def value_table(curve: str) -> np.ndarray:
-    """Curve values at ``i / LUT_STEPS`` (float32, length LUT_STEPS + 2; the last entry repeats)."""
-    x = np.arange(LUT_STEPS + 2, dtype=np.float64) / LUT_STEPS
-    x[-1] = 1.0
-    y = srgb_oetf64(x) if curve == "srgb" else x
-    return y.astype(np.float32)
+def table_steps(depth: str) -> int:
+    """Linear-value steps on [0, 1] of the code table for ``depth`` (2^16 for uint8, 2^20 for uint16)."""
+    return 1 << 16 if depth == "uint8" else 1 << 20
 
 
-@njit(inline="always")
-def _curve(v, table, srgb):  # pragma: no cover - compiled
-    if not srgb:
-        return v
-    if v >= np.float32(0.0) and v <= np.float32(1.0):
-        t = v * np.float32(LUT_STEPS)
-        k = np.int32(t)
-        f = t - np.float32(k)
-        return table[k] + f * (table[k + 1] - table[k])
-    if v < np.float32(0.0):
-        return v * np.float32(12.92)
-    return np.float32(1.055 * np.exp(np.log(np.float64(v)) / 2.4) - 0.055)
+@lru_cache(maxsize=4)
+def code_table(depth: str) -> np.ndarray:
+    """sRGB codes of the linear values ``i / table_steps(depth)``, ``i = 0 .. steps`` (of type ``depth``)."""
+    n = table_steps(depth)
+    top = 255 if depth == "uint8" else 65535
+    x = np.arange(n + 1, dtype=np.float64) / n
+    t = np.round(np.clip(srgb_oetf64(x), 0.0, 1.0) * top).astype(depth)
+    t.flags.writeable = False
+    return t
 
 
-@njit(cache=True, parallel=True, nogil=True)
-def _encode(rgb, m, lo, hi, table, srgb, top, out):  # pragma: no cover - compiled
-    """``top > 0``: integer samples ``rint(clip(y, 0, 1) top)``; ``top == 0``: float values."""
-    h, w = rgb.shape[0], rgb.shape[1]
-    bad = np.zeros(h, np.uint8)
-    for i in prange(h):
-        for j in range(w):
-            r, g, b = rgb[i, j, 0], rgb[i, j, 1], rgb[i, j, 2]
-            for c in range(3):
-                v = m[c, 0] * r + m[c, 1] * g + m[c, 2] * b
-                if not np.isfinite(v):
-                    bad[i] = 1
-                    v = np.float32(0.0)
-                v = _curve(min(max(v, lo), hi), table, srgb)
-                if top > 0:
-                    v = np.rint(min(max(v, np.float32(0.0)), np.float32(1.0)) * top)
-                out[i, j, c] = v
-    return bad.any()
+def threads() -> int:
+    """Worker threads: ``SIMCAM_THREADS`` if set, else the number of cores this process may use."""
+    env = os.environ.get("SIMCAM_THREADS")
+    if env:
+        return max(1, int(env))
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+def _for_bands(h: int, fn) -> bool:
+    """Run ``fn(r0, r1)`` on every band of rows; True if any returned True."""
+    bands = [(r, min(h, r + BAND_ROWS)) for r in range(0, h, BAND_ROWS)]
+    n = min(threads(), len(bands))
+    if n <= 1:
+        return any([fn(a, b) for a, b in bands])
+    with ThreadPoolExecutor(n) as ex:
+        return any(list(ex.map(lambda ab: fn(*ab), bands)))
 
 
 def encode_display(rgb: np.ndarray, matrix: np.ndarray, *, lo: float | None = None, hi: float | None = None,
@@ -105,46 +108,63 @@ def encode_display(rgb: np.ndarray, matrix: np.ndarray, *, lo: float | None = No
     ValueError
         If the matrix product has a NaN or infinite value.
     """
+    from .display import srgb_oetf
+
     if curve not in ("srgb", "linear"):
         raise ValueError(f"encode_display: curve: expected 'srgb' or 'linear', got {curve!r}")
-    rgb = np.ascontiguousarray(rgb, dtype=np.float32)
-    if rgb.ndim != 3 or rgb.shape[2] != 3:
-        raise ValueError(f"encode_display: expected an H x W x 3 image, got shape {rgb.shape}")
-    m = np.ascontiguousarray(matrix, dtype=np.float32)
-    flo = np.float32(-np.inf if lo is None else lo)
-    fhi = np.float32(np.inf if hi is None else hi)
-    h, w = rgb.shape[:2]
     if depth not in ("uint8", "uint16", "float32", "half"):
         raise ValueError(f"encode_display: depth: expected uint8, uint16, float32 or half, got {depth!r}")
-    top = np.float32({"uint8": 255, "uint16": 65535}.get(depth, 0))
-    out = np.empty((h, w, 3), depth if top else np.float32)
-    bad = _encode(rgb, m, flo, fhi, value_table("srgb"), curve == "srgb", top, out)
-    if depth == "half":
-        out = out.astype(np.float16)
-    if bad:
+    rgb = np.asarray(rgb, dtype=np.float32)
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise ValueError(f"encode_display: expected an H x W x 3 image, got shape {rgb.shape}")
+    m = np.asarray(matrix, dtype=np.float64).astype(np.float32)
+    lo = -np.inf if lo is None else float(lo)
+    hi = np.inf if hi is None else float(hi)
+    integer = depth in ("uint8", "uint16")
+    if integer:  # clip(clip(v, lo, hi), 0, 1) == clip(v, clip(lo, 0, 1), clip(hi, 0, 1))
+        lo, hi = float(np.clip(lo, 0.0, 1.0)), float(np.clip(hi, 0.0, 1.0))
+    flo, fhi = np.float32(lo), np.float32(hi)
+    h, w = rgb.shape[:2]
+    out = np.empty((h, w, 3), depth if depth != "half" else np.float16)
+    if integer and curve == "srgb":
+        table, scale = code_table(depth), np.float32(table_steps(depth))
+    else:
+        table, scale = None, np.float32(255 if depth == "uint8" else 65535)
+
+    def band(r0: int, r1: int) -> bool:
+        x = rgb[r0:r1]
+        r, g, b = x[..., 0], x[..., 1], x[..., 2]
+        acc = np.empty(r.shape, np.float32)
+        tmp = np.empty(r.shape, np.float32)
+        ok = np.empty(r.shape, bool)
+        idx = np.empty(r.shape, np.int32) if integer else None
+        for c in range(3):
+            np.multiply(r, m[c, 0], out=acc)
+            np.multiply(g, m[c, 1], out=tmp)
+            acc += tmp
+            np.multiply(b, m[c, 2], out=tmp)
+            acc += tmp
+            np.isfinite(acc, out=ok)
+            if not ok.all():
+                return True
+            if flo > -np.inf or fhi < np.inf:
+                np.clip(acc, flo, fhi, out=acc)
+            if integer:
+                acc *= scale
+                np.rint(acc, out=acc)
+                idx[...] = acc
+                out[r0:r1, :, c] = table[idx] if table is not None else idx
+            else:
+                out[r0:r1, :, c] = srgb_oetf(acc) if curve == "srgb" else acc
+        return False
+
+    if _for_bands(h, band):
         raise ValueError("image data contains NaN or infinite values")
     return out
 
 
-@njit(cache=True, parallel=True, nogil=True)
-def _quantise(flat, top, out):  # pragma: no cover - compiled
-    n = flat.size
-    chunk = 1 << 16
-    nchunks = (n + chunk - 1) // chunk
-    bad = np.zeros(nchunks, np.uint8)
-    for k in prange(nchunks):
-        for i in range(k * chunk, min(n, (k + 1) * chunk)):
-            v = flat[i]
-            if not np.isfinite(v):
-                bad[k] = 1
-                v = np.float32(0.0)
-            v = min(max(v, np.float32(0.0)), np.float32(1.0))
-            out[i] = np.rint(v * top)
-    return bad.any()
-
-
 def quantise(data: np.ndarray, depth: str) -> np.ndarray:
-    """``round(clip(x, 0, 1) * (2^b - 1))`` as ``uint8``/``uint16`` (round half to even), in parallel.
+    """``round(clip(x, 0, 1) * (2^b - 1))`` as ``uint8``/``uint16`` (round half to even), on bands in threads.
 
     Same values as ``np.round(np.clip(x, 0, 1) * top).astype(depth)`` on float32 data.
 
@@ -153,9 +173,25 @@ def quantise(data: np.ndarray, depth: str) -> np.ndarray:
     ValueError
         If ``data`` has a NaN or infinite value.
     """
-    x = np.ascontiguousarray(data, dtype=np.float32)
+    x = np.asarray(data, dtype=np.float32)
     out = np.empty(x.shape, dtype=depth)
     top = np.float32(255 if depth == "uint8" else 65535)
-    if _quantise(x.reshape(-1), top, out.reshape(-1)):
+    if x.ndim == 0 or x.shape[0] == 0:
+        if not np.all(np.isfinite(x)):
+            raise ValueError("image data contains NaN or infinite values")
+        out[...] = np.round(np.clip(x, 0, 1) * top)
+        return out
+
+    def band(r0: int, r1: int) -> bool:
+        v = x[r0:r1]
+        if not np.isfinite(v).all():
+            return True
+        t = np.clip(v, np.float32(0), np.float32(1))
+        t *= top
+        np.rint(t, out=t)
+        out[r0:r1] = t
+        return False
+
+    if _for_bands(x.shape[0], band):
         raise ValueError("image data contains NaN or infinite values")
     return out
