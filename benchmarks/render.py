@@ -23,10 +23,10 @@ render, file write), as a user waits for them: ``python -m simcam render X.dng
 (``--process-runs``, default 5; 0 skips it).
 
 Threads: numpy runs its element-wise kernels on one thread; the fused display
-tail runs on numba's threads (``NUMBA_NUM_THREADS``, default: all cores; its
-output is the same whatever the count); LibRaw uses OpenMP (``OMP_NUM_THREADS``,
+tail runs on a thread pool (``SIMCAM_THREADS``, default: all cores; its output
+is the same whatever the count); LibRaw uses OpenMP (``OMP_NUM_THREADS``,
 default: all cores). Set ``OMP_NUM_THREADS`` (or ``--omp-threads N``),
-``NUMBA_NUM_THREADS`` and ``OPENBLAS_NUM_THREADS`` in the environment to change
+``SIMCAM_THREADS`` and ``OPENBLAS_NUM_THREADS`` in the environment to change
 them; all are printed, with the CPU model and the load average (the machine may
 be shared: compare ratios measured in the same run).
 
@@ -330,12 +330,12 @@ def print_tables(h, w, runs, results, cpu, steps, diffs, *, out=print) -> None:
 def _thread_line() -> str:
     omp = os.environ.get("OMP_NUM_THREADS", f"unset (LibRaw OpenMP uses all {os.cpu_count()} cores)")
     blas = os.environ.get("OPENBLAS_NUM_THREADS", "unset")
-    import numba
+    from simcam.colour.display_kernel import threads
 
-    return (f"Threads: numpy element-wise kernels single-threaded; fused display tail on {numba.get_num_threads()} "
-            f"numba threads (NUMBA_NUM_THREADS={os.environ.get('NUMBA_NUM_THREADS', 'unset')}); OMP_NUM_THREADS={omp}; "
+    return (f"Threads: numpy element-wise kernels single-threaded, except the fused display tail on {threads()} "
+            f"threads (SIMCAM_THREADS={os.environ.get('SIMCAM_THREADS', 'unset')}); OMP_NUM_THREADS={omp}; "
             f"OPENBLAS_NUM_THREADS={blas}. Machine: {_cpu_model()}, {os.cpu_count()} cores; numpy {np.__version__}, "
-            f"numba {numba.__version__}, rawpy {_rawpy_version()}. Load average (1/5/15 min) now: {_load()}.")
+            f"rawpy {_rawpy_version()}. Load average (1/5/15 min) now: {_load()}.")
 
 
 def _cpu_model() -> str:

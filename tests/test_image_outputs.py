@@ -146,3 +146,24 @@ def test_untagged_kinds_and_integer_samples(tmp_path):
     assert np.array_equal(np.asarray(Image.open(p)), s)
     with pytest.raises(ImageIOError, match="uint8 samples cannot be written as uint16"):
         write_image(tmp_path / "s16.png", s, depth=16)
+
+
+def test_cli_render_outputs(tmp_path):
+    from conftest import REPO
+    from simcam.cli import main
+
+    dng = REPO / "examples" / "data" / "chart.dng"
+    out, thumb = tmp_path / "o.jpg", tmp_path / "t.png"
+    assert main(["render", str(dng), "-o", str(out), "--quality", "80", "--thumbnail", str(thumb)]) == 0
+    with Image.open(out) as im:
+        assert im.size == (600, 400) and im.info["icc_profile"] == srgb_icc_profile(False)
+    with Image.open(thumb) as im:
+        assert max(im.size) <= 256
+    tif = tmp_path / "lin.tif"
+    assert main(["render", str(dng), "-o", str(tif), "-p", "linear-srgb", "--depth", "16",
+                 "--compression", "zip"]) == 0
+    with tifffile.TiffFile(tif) as t:
+        assert t.pages[0].compression == 8
+        assert bytes(t.pages[0].tags["InterColorProfile"].value) == srgb_icc_profile(True)
+    assert main(["render", str(dng), "-o", str(tmp_path / "x.png"), "--compression", "lzw"]) == 2
+    assert not (tmp_path / "x.png").exists()
