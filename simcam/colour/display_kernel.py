@@ -71,9 +71,10 @@ def threads() -> int:
         return os.cpu_count() or 1
 
 
-def _for_bands(h: int, fn) -> bool:
-    """Run ``fn(r0, r1)`` on every band of rows; True if any returned True."""
-    bands = [(r, min(h, r + BAND_ROWS)) for r in range(0, h, BAND_ROWS)]
+def run_bands(h: int, fn, rows: int = BAND_ROWS) -> bool:
+    """Run ``fn(r0, r1)`` on every band of ``rows`` rows of ``range(h)`` on :func:`threads` threads;
+    True if any call returned True."""
+    bands = [(r, min(h, r + rows)) for r in range(0, h, rows)]
     n = min(threads(), len(bands))
     if n <= 1:
         return any([fn(a, b) for a, b in bands])
@@ -158,7 +159,7 @@ def encode_display(rgb: np.ndarray, matrix: np.ndarray, *, lo: float | None = No
                 out[r0:r1, :, c] = srgb_oetf(acc) if curve == "srgb" else acc
         return False
 
-    if _for_bands(h, band):
+    if run_bands(h, band):
         raise ValueError("image data contains NaN or infinite values")
     return out
 
@@ -192,6 +193,6 @@ def quantise(data: np.ndarray, depth: str) -> np.ndarray:
         out[r0:r1] = t
         return False
 
-    if _for_bands(x.shape[0], band):
+    if run_bands(x.shape[0], band):
         raise ValueError("image data contains NaN or infinite values")
     return out
