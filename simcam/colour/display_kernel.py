@@ -26,11 +26,11 @@ less elsewhere). Float outputs use the exact curve (:func:`simcam.colour.display
 
 from __future__ import annotations
 
-import os
-from concurrent.futures import ThreadPoolExecutor
 from functools import lru_cache
 
 import numpy as np
+
+from ..parallel import run_bands, threads  # noqa: F401  (threads: re-exported for the benchmark)
 
 #: rows per band (a band of a 4000-wide image is 0.8 MB of float32 input)
 BAND_ROWS = 16
@@ -58,28 +58,6 @@ def code_table(depth: str) -> np.ndarray:
     t = np.round(np.clip(srgb_oetf64(x), 0.0, 1.0) * top).astype(depth)
     t.flags.writeable = False
     return t
-
-
-def threads() -> int:
-    """Worker threads: ``SIMCAM_THREADS`` if set, else the number of cores this process may use."""
-    env = os.environ.get("SIMCAM_THREADS")
-    if env:
-        return max(1, int(env))
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # not Linux
-        return os.cpu_count() or 1
-
-
-def run_bands(h: int, fn, rows: int = BAND_ROWS) -> bool:
-    """Run ``fn(r0, r1)`` on every band of ``rows`` rows of ``range(h)`` on :func:`threads` threads;
-    True if any call returned True."""
-    bands = [(r, min(h, r + rows)) for r in range(0, h, rows)]
-    n = min(threads(), len(bands))
-    if n <= 1:
-        return any([fn(a, b) for a, b in bands])
-    with ThreadPoolExecutor(n) as ex:
-        return any(list(ex.map(lambda ab: fn(*ab), bands)))
 
 
 def encode_display(rgb: np.ndarray, matrix: np.ndarray, *, lo: float | None = None, hi: float | None = None,
@@ -159,7 +137,7 @@ def encode_display(rgb: np.ndarray, matrix: np.ndarray, *, lo: float | None = No
                 out[r0:r1, :, c] = srgb_oetf(acc) if curve == "srgb" else acc
         return False
 
-    if run_bands(h, band):
+    if run_bands(h, band, rows=BAND_ROWS):
         raise ValueError("image data contains NaN or infinite values")
     return out
 
@@ -193,6 +171,6 @@ def quantise(data: np.ndarray, depth: str) -> np.ndarray:
         out[r0:r1] = t
         return False
 
-    if run_bands(x.shape[0], band):
+    if run_bands(x.shape[0], band, rows=BAND_ROWS):
         raise ValueError("image data contains NaN or infinite values")
     return out

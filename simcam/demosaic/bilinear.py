@@ -11,8 +11,11 @@ mirror, which keeps the Bayer phase (see :mod:`simcam.demosaic._planes`).
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
+from ..parallel import run_bands
 from ._planes import STRIP_ROWS, PhaseView, check_mosaic, crop_output, phase_planes, site_layout
 
 
@@ -43,9 +46,12 @@ def demosaic_bilinear(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
     h2, w2 = he // 2, we // 2
     rgb = np.empty((he, we, 3), dtype=np.float32)
     rows = min(STRIP_ROWS, h2)
-    buf = np.empty((rows, w2), dtype=np.float32)
-    for s0 in range(0, h2, rows):
-        s1 = min(s0 + rows, h2)
+    local = threading.local()
+
+    def strip(s0: int, s1: int) -> bool:  # strips are independent: run on threads, same bytes
+        buf = getattr(local, "buf", None)
+        if buf is None:
+            buf = local.buf = np.empty((rows, w2), dtype=np.float32)
         t = buf[: s1 - s0]
         for (p, q), (site, horiz) in site_layout(cfa).items():
             nb = PhaseView(planes, p, q, s0, s1, w2)
@@ -65,4 +71,7 @@ def demosaic_bilinear(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
                 t += nb(1, -1)
                 t += nb(1, 1)
                 np.multiply(t, 0.25, out=out[..., 2 - site])
+        return False
+
+    run_bands(h2, strip, rows=rows)
     return crop_output(rgb, h, w)

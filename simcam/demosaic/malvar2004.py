@@ -14,8 +14,11 @@ keeps the Bayer phase (see :mod:`simcam.demosaic._planes`).
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
+from ..parallel import run_bands
 from ._planes import STRIP_ROWS, PhaseView, check_mosaic, crop_output, phase_planes, site_layout
 
 
@@ -49,9 +52,12 @@ def demosaic_malvar2004(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
     rgb = np.empty((he, we, 3), dtype=np.float32)
     layout = site_layout(cfa)
     rows = min(STRIP_ROWS, h2)
-    bufs = [np.empty((rows, w2), dtype=np.float32) for _ in range(5)]
-    for s0 in range(0, h2, rows):
-        s1 = min(s0 + rows, h2)
+    local = threading.local()
+
+    def strip(s0: int, s1: int) -> bool:  # strips are independent: run on threads, same bytes
+        bufs = getattr(local, "bufs", None)
+        if bufs is None:
+            bufs = local.bufs = [np.empty((rows, w2), dtype=np.float32) for _ in range(5)]
         t = [b[: s1 - s0] for b in bufs]
         for (p, q), (site, horiz) in layout.items():
             nb = PhaseView(planes, p, q, s0, s1, w2)
@@ -62,6 +68,9 @@ def demosaic_malvar2004(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
                 _green_site(nb, c, out, horiz, 2 - horiz, *t)
             else:
                 _red_blue_site(nb, c, out, 2 - site, *t)
+        return False
+
+    run_bands(h2, strip, rows=rows)
     return crop_output(rgb, h, w)
 
 

@@ -144,7 +144,7 @@ def demosaic_menon2007(mosaic: np.ndarray, cfa: str = "RGGB", *, refining_step: 
     ndarray
         H x W x 3 float32, not clipped.
     """
-    from ..colour.display_kernel import run_bands
+    from ..parallel import run_bands
 
     m, cfa = check_mosaic(mosaic, cfa, "menon2007")
     h, w = m.shape
