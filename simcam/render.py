@@ -13,8 +13,17 @@ That tail runs as one parallel pass (:func:`simcam.colour.display_kernel.encode_
 writing the output samples directly; orientation is then a view of them.
 The samples equal the stage-by-stage render's quantised output within one
 code (the transfer curve is read from a table; the matrices are multiplied
-together first). Pipelines with any other tail run stage by stage, and the
-samples come from :func:`simcam.io.images.to_samples`.
+together first).
+
+Otherwise, a tail of per-pixel stages (:data:`PER_PIXEL`, in any order and with
+any parameters, e.g. a filmic tone curve or simple-camera-pipeline's power
+gamma and smoothstep) with at most one ``orientation`` among them runs band by
+band (:func:`render_banded`): each band of rows goes through the stages' own
+code and is quantised while it is in cache, bands on threads, and orientation
+(which commutes with per-pixel stages) is applied to the samples at the end.
+The samples are those of the stage-by-stage render (the same functions on the
+same pixels). Any other pipeline runs stage by stage, and the samples come
+from :func:`simcam.io.images.to_samples`.
 """
 
 from __future__ import annotations
@@ -26,6 +35,10 @@ import numpy as np
 from .frame import RawFrame
 
 _LINEAR = ("camera_to_xyz", "xyz_to_srgb", "tone")
+#: stages that act on each pixel alone (no neighbours, no randomness), so they can run on row bands
+PER_PIXEL = frozenset({"camera_to_xyz", "xyz_to_srgb", "tone", "clip", "gamma", "quantize"})
+#: rows per band of :func:`render_banded`
+BANDED_ROWS = 32
 
 
 @dataclass
@@ -88,13 +101,72 @@ def render_samples(pipe, frame: RawFrame, depth: str, *, seed: int | None = None
     from .io.images import to_samples
 
     stages = pipe.stages
-    start = fusable_tail(stages) if fuse and frame.kind == pipe.input_kind else len(stages)
-    if start == len(stages):
-        out = pipe(frame, seed=seed)
-        return Rendered(to_samples(out.data, depth), out.kind, out.meta, depth)
-    head = _head(pipe, start)
-    frame = head(frame, seed=seed) if head is not None else frame
-    return render_tail(stages[start:], frame, depth)
+    usable = fuse and frame.kind == pipe.input_kind
+    start = fusable_tail(stages) if usable else len(stages)
+    if start < len(stages):
+        head = _head(pipe, start)
+        frame = head(frame, seed=seed) if head is not None else frame
+        return render_tail(stages[start:], frame, depth)
+    start = banded_tail(stages) if usable else len(stages)
+    if start < len(stages):
+        head = _head(pipe, start)
+        frame = head(frame, seed=seed) if head is not None else frame
+        return render_banded(stages[start:], frame, depth)
+    out = pipe(frame, seed=seed)
+    return Rendered(to_samples(out.data, depth), out.kind, out.meta, depth)
+
+
+def banded_tail(stages) -> int:
+    """Index of the first stage of the longest tail of per-pixel stages (with at most one
+    ``orientation``) that follows an RGB stage; ``len(stages)`` if there is none."""
+    i, n_orient = len(stages), 0
+    while i and (stages[i - 1].type in PER_PIXEL or (stages[i - 1].type == "orientation" and n_orient == 0)):
+        n_orient += stages[i - 1].type == "orientation"
+        i -= 1
+    if i == 0 or all(s.type == "orientation" for s in stages[i:]):
+        return len(stages)
+    return i
+
+
+def render_banded(tail, frame: RawFrame, depth: str) -> Rendered:
+    """Run per-pixel stages (and one orientation, moved to the end) on bands of rows, quantising each band."""
+    from .errors import ImageIOError
+    from .parallel import run_bands
+    from .stages.orientation import orient
+
+    if frame.data.ndim != 3:
+        raise ValueError("render_banded: expected an H x W x 3 frame")
+    pixel = [s for s in tail if s.type != "orientation"]
+    orientation = next((s for s in tail if s.type == "orientation"), None)
+    h, w = frame.data.shape[:2]
+    out = np.empty((h, w, 3), depth if depth != "half" else np.float16)
+    last: list = []
+
+    def band(r0: int, r1: int) -> bool:
+        f = RawFrame(frame.data[r0:r1], frame.meta, kind=frame.kind)
+        for st in pixel:
+            f = st(f)
+        x = f.data
+        if not np.isfinite(x).all():
+            return True
+        if depth in ("uint8", "uint16"):  # as to_samples: round(clip(x, 0, 1) * top), half to even
+            x = np.clip(x, np.float32(0), np.float32(1)) * np.float32(255 if depth == "uint8" else 65535)
+            np.rint(x, out=x)
+        out[r0:r1] = x
+        if r0 == 0:
+            last.append(f)
+        return False
+
+    if run_bands(h, band, rows=BANDED_ROWS):
+        raise ImageIOError(f"{frame.meta.source or 'frame'}: image data contains NaN or infinite values")
+    kind, meta = last[0].kind, last[0].meta
+    if orientation is not None:
+        orientation.check_input(RawFrame(np.zeros((1, 1, 3), np.float32), meta, kind=kind))
+        value = orientation.transform_value(meta)
+        out = np.ascontiguousarray(orient(out, value))
+        meta = meta.copy()
+        meta.orientation = 1
+    return Rendered(out, kind, meta, depth)
 
 
 def _head(pipe, start: int):
