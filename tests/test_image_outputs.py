@@ -167,3 +167,14 @@ def test_cli_render_outputs(tmp_path):
         assert bytes(t.pages[0].tags["InterColorProfile"].value) == srgb_icc_profile(True)
     assert main(["render", str(dng), "-o", str(tmp_path / "x.png"), "--compression", "lzw"]) == 2
     assert not (tmp_path / "x.png").exists()
+
+
+def test_png_zlib_level(tmp_path):
+    # a smooth image: level 9 compresses at least as well as level 1, and both read back exactly
+    y, x = np.mgrid[0:64, 0:96] / 96.0
+    f = RawFrame(np.stack([x, y, x * y], -1).astype(np.float32), CameraMeta(), kind="display")
+    p1 = write_image(tmp_path / "l1.png", f, depth=16)
+    p9 = write_image(tmp_path / "l9.png", f, depth=16, compression="zip:9")
+    assert p9.stat().st_size <= p1.stat().st_size
+    for p in (p1, p9):
+        np.testing.assert_array_equal(np.round(read_image(p).astype(np.float64) * 65535), to_samples(f.data, "uint16"))

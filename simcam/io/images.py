@@ -193,7 +193,8 @@ def write_image(path: str | Path, data, *, depth: str | int | None = None,
     ext = path.suffix.lower()
     if comp is not None:
         spec.attribute("compression", comp)
-    if ext == ".png":
+    if ext == ".png":  # OpenImageIO's PNG writer takes the zlib level from png:compressionLevel
+        spec.attribute("png:compressionLevel", int(comp.partition(":")[2] or 6))
         spec.attribute("png:filter", _PNG_FILTER_SUB)
     if ext in (".jpg", ".jpeg"):
         spec.attribute("Compression", f"jpeg:{int(quality)}")
