@@ -19,11 +19,11 @@ in the same run. A second table breaks the simcam render into its steps.
 A third table times whole processes, start to exit (interpreter, imports,
 render, file write), as a user waits for them: ``python -m simcam render X.dng
 -o out.tif --depth 16`` against a Python process doing rawpy AHD (16-bit) and
-``tifffile.imwrite`` of the same TIFF, and ``python -m simcam --help``
-(``--process-runs``, default 5; 0 skips it).
+``tifffile.imwrite`` of the same TIFF, the ``sidd-srgb`` and ``srgb`` renders to
+PNG, and ``python -m simcam --help`` (``--process-runs``, default 5; 0 skips it).
 
-Threads: numpy runs its element-wise kernels on one thread; the fused display
-tail runs on a thread pool (``SIMCAM_THREADS``, default: all cores; its output
+Threads: numpy runs its element-wise kernels on one thread; simcam's demosaic
+strips and the fused display tail run on a thread pool (``SIMCAM_THREADS``, default: all cores; its output
 is the same whatever the count); LibRaw uses OpenMP (``OMP_NUM_THREADS``,
 default: all cores). Set ``OMP_NUM_THREADS`` (or ``--omp-threads N``),
 ``SIMCAM_THREADS`` and ``OPENBLAS_NUM_THREADS`` in the environment to change
@@ -261,6 +261,9 @@ def process_commands(dng: Path, tmp: Path) -> dict[str, list[str]]:
                                                  str(tmp / "simcam16.tif"), "--depth", "16"],
         "python: rawpy AHD + tifffile.imwrite (16-bit)": [py, "-c", RAWPY_TIFF_SCRIPT, str(dng),
                                                            str(tmp / "rawpy16.tif")],
+        "simcam render -p sidd-srgb -o out.png": [py, "-m", "simcam", "render", str(dng), "-o",
+                                                  str(tmp / "sidd.png"), "-p", "sidd-srgb"],
+        "simcam render -o out.png (8-bit)": [py, "-m", "simcam", "render", str(dng), "-o", str(tmp / "srgb8.png")],
         "simcam --help": [py, "-m", "simcam", "--help"],
     }
 
@@ -332,8 +335,8 @@ def _thread_line() -> str:
     blas = os.environ.get("OPENBLAS_NUM_THREADS", "unset")
     from simcam.colour.display_kernel import threads
 
-    return (f"Threads: numpy element-wise kernels single-threaded, except the fused display tail on {threads()} "
-            f"threads (SIMCAM_THREADS={os.environ.get('SIMCAM_THREADS', 'unset')}); OMP_NUM_THREADS={omp}; "
+    return (f"Threads: simcam's demosaic strips and fused display tail on {threads()} threads, other steps "
+            f"single-threaded numpy (SIMCAM_THREADS={os.environ.get('SIMCAM_THREADS', 'unset')}); OMP_NUM_THREADS={omp}; "
             f"OPENBLAS_NUM_THREADS={blas}. Machine: {_cpu_model()}, {os.cpu_count()} cores; numpy {np.__version__}, "
             f"rawpy {_rawpy_version()}. Load average (1/5/15 min) now: {_load()}.")
 
