@@ -29,6 +29,6 @@ def run_bands(h: int, fn, rows: int = 16) -> bool:
     bands = [(r, min(h, r + rows)) for r in range(0, h, rows)]
     n = min(threads(), len(bands))
     if n <= 1:
-        return any([fn(a, b) for a, b in bands])
+        return any([fn(a, b) for a, b in bands])  # noqa: C419 (a list: every band must run)
     with ThreadPoolExecutor(n) as ex:
         return any(list(ex.map(lambda ab: fn(*ab), bands)))

@@ -150,6 +150,7 @@ def test_untagged_kinds_and_integer_samples(tmp_path):
 
 def test_cli_render_outputs(tmp_path):
     from conftest import REPO
+
     from simcam.cli import main
 
     dng = REPO / "examples" / "data" / "chart.dng"

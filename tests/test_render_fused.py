@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from conftest import REPO, shared_path
+
 from simcam.colour.display_kernel import encode_display, quantise
 from simcam.io.dng import read_dng
 from simcam.pipeline import Pipeline
@@ -132,7 +132,7 @@ def test_banded_tail_of_pipelines():
     assert [s.type for s in sidd.stages[banded_tail(sidd.stages):]] == [
         "camera_to_xyz", "clip", "xyz_to_srgb", "clip", "orientation", "gamma", "tone"]
     filmic = Pipeline.from_yaml("srgb").with_overrides({"tone.curve": "filmic"})
-    assert [s.type for s in filmic.stages[banded_tail(filmic.stages):]][0] == "camera_to_xyz"
+    assert next(s.type for s in filmic.stages[banded_tail(filmic.stages):]) == "camera_to_xyz"
 
 
 @pytest.mark.parametrize("name,overrides", [("sidd-srgb", None), ("srgb", {"tone.curve": "filmic", "tone.exposure": 1.0}),

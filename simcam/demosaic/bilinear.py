@@ -16,7 +16,14 @@ import threading
 import numpy as np
 
 from ..parallel import run_bands
-from ._planes import STRIP_ROWS, PhaseView, check_mosaic, crop_output, phase_planes, site_layout
+from ._planes import (
+    STRIP_ROWS,
+    PhaseView,
+    check_mosaic,
+    crop_output,
+    phase_planes,
+    site_layout,
+)
 
 
 def demosaic_bilinear(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:

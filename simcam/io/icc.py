@@ -22,7 +22,7 @@ PCS_D50 = (0.9642, 1.0, 0.8249)
 
 
 def _s15(v: float) -> bytes:
-    return struct.pack(">i", int(round(v * 65536.0)))
+    return struct.pack(">i", round(v * 65536.0))
 
 
 def _xyz_tag(xyz) -> bytes:

@@ -113,7 +113,7 @@ def exif_attributes(meta) -> dict:
     if getattr(meta, "model", ""):
         out["Model"] = str(meta.model)
     if getattr(meta, "iso", None):
-        out["Exif:PhotographicSensitivity"] = int(round(float(meta.iso)))
+        out["Exif:PhotographicSensitivity"] = round(float(meta.iso))
     if getattr(meta, "exposure_time_s", None):
         out["ExposureTime"] = float(meta.exposure_time_s)
     extra = getattr(meta, "extra", None) or {}
