@@ -111,7 +111,11 @@ def render_samples(pipe, frame: RawFrame, depth: str, *, seed: int | None = None
     if start < len(stages):
         head = _head(pipe, start)
         frame = head(frame, seed=seed) if head is not None else frame
-        return render_banded(stages[start:], frame, depth)
+        if frame.data.ndim == 3:
+            return render_banded(stages[start:], frame, depth)
+        for st in stages[start:]:  # a mosaic (e.g. a clip after normalize): per-pixel, but not RGB bands
+            frame = st(frame)
+        return Rendered(to_samples(frame.data, depth), frame.kind, frame.meta, depth)
     out = pipe(frame, seed=seed)
     return Rendered(to_samples(out.data, depth), out.kind, out.meta, depth)
 

@@ -159,3 +159,11 @@ def test_banded_render_equals_stage_by_stage(name, overrides, depth, monkeypatch
         assert np.abs(r.samples.astype(float) - expect).max() <= (1 if depth != "float32" else 1e-6)
         assert (r.samples != expect).mean() < 1e-3
     assert outs[0] == outs[1]
+
+
+def test_render_samples_on_a_raw_pipeline():
+    pipe = Pipeline.from_dict({"version": 1, "stages": [{"type": "normalize"}, {"type": "clip", "low": 0.0, "high": 1.0}]})
+    frame = read_dng(EXAMPLE)
+    r = render_samples(pipe, frame, "uint16")
+    ref = pipe(frame)
+    assert r.kind == ref.kind and np.array_equal(r.samples, np.round(np.clip(ref.data, 0, 1) * np.float32(65535)))
