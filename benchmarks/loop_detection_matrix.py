@@ -2,13 +2,13 @@
 
 Capture set per case: 64x64 RGGB 10-bit sensor (K = 2 DN/e-, read 3 DN, black 64 DN), one dark
 and four flat sequences of 12 frames (6 fit / 6 held out), made by the test-owned generator
-``tests/loop_generator.py`` (independent of simcam's noise code). The loop runs with its defaults
+``tests/calibration/loop_generator.py`` (independent of simcam's noise code). The loop runs with its defaults
 (16 bootstrap replicates, Holm at alpha = 0.01).
 
 Run: ``python benchmarks/loop_detection_matrix.py [--seeds 7,8,9]`` (capture-noise seeds; the
 first prints the full table with fitted parameters, the others only the summary). Columns: the
 held-out one-pixel KL (Noise Flow binning) at the base fit and the final model, its sampling floor and
-drop; the structured marginal KL (``simcam.dataset.loop_kl``: sum over aggregated-noise families of
+drop; the structured marginal KL (``simcam.calibration.heldout``: sum over aggregated-noise families of
 their significant floor-corrected KLs) at base and final and its drop (``Sdrop``); ``Udrop`` the
 drop of the ungated sum (every family's floor-corrected excess, significant or not).
 """
@@ -18,7 +18,7 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests" / "calibration"))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from loop_matrix import CASES, run_case, scaled  # noqa: E402

@@ -10,7 +10,7 @@ import time
 from collections import Counter
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests" / "calibration"))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from loop_matrix import run_case  # noqa: E402

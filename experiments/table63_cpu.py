@@ -9,7 +9,7 @@ DnCNN (packed raw) is trained on noise from four sources and tested on held-out
 * **Real**: the real noisy/ground-truth training pairs themselves.
 
 "Real" captures come from the test-owned hidden-effect sensor generator of the
-loop issue (``tests/loop_generator.py``; plain numpy, not simcam's noise code):
+loop issue (``tests/calibration/loop_generator.py``; plain numpy, not simcam's noise code):
 Poisson-Gaussian plus heavy-tailed, spatially correlated read noise, row noise,
 DSNU, column FPN and hot pixels, 10-bit quantisation. Scenes are 256x256 mosaic
 crops of real raw photographs (GoPro HERO6 and Canon 550D for training, the
@@ -32,7 +32,7 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
-sys.path.insert(0, str(REPO / "tests"))
+sys.path.insert(0, str(REPO / "tests" / "calibration"))
 
 SHARED = REPO.parent / "shared" / "data" / "dng"
 TRAIN_DNGS = ["gopro_hero6_iso100.dng", "canon_550d_colorchecker.dng"]

@@ -2,17 +2,32 @@
 
 Commands live in ``simcam/commands/*.py``; each module defines
 ``register(app)``. Heavy imports (numpy, rawpy, torch, ...) happen inside the
-commands so that ``simcam --help`` stays fast. A :class:`SimcamError` is
-printed as one line on stderr with exit code 2, never as a traceback.
+commands so that ``simcam --help`` stays fast.
+
+Every failure is one line on stderr:
+
+* a :class:`~simcam.errors.SimcamError` (bad input) -> ``simcam CMD: error: ...``, exit 2;
+* a usage error (unknown option or command, missing or malformed argument) -> one line and a
+  usage hint on a second line, exit 2;
+* any other exception inside a command -> ``simcam CMD: internal error: Type: message``,
+  exit 1; the traceback is printed only with ``--debug`` or ``SIMCAM_DEBUG=1``.
+
+typer >= 0.16 vendors click as ``typer._click`` and no longer installs ``click``; older typer
+uses ``click`` itself. The exception classes are therefore taken from the classes typer exports
+(:func:`_click_exceptions`), never from an ``import click``.
 """
 
 from __future__ import annotations
 
 import importlib
+import os
 import pkgutil
 import sys
+from types import ModuleType
 
 import typer
+
+CONTEXT_SETTINGS = {"help_option_names": ["-h", "--help"]}
 
 app = typer.Typer(
     name="simcam",
@@ -20,7 +35,33 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    context_settings=CONTEXT_SETTINGS,
+    rich_markup_mode=None,  # help texts are plain: "SeedSequence([seed, 0, i])" is not rich markup
 )
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("simcam")
+    except PackageNotFoundError:  # pragma: no cover - running from a source tree
+        return "unknown"
+
+
+def _show_version(value: bool) -> None:
+    if value:
+        typer.echo(f"simcam {_version()}")
+        raise typer.Exit(0)
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(False, "--version", is_eager=True, callback=_show_version,
+                                 help="Print the version and exit."),
+    debug: bool = typer.Option(False, "--debug", help="Print the traceback of an internal error."),
+) -> None:
+    """Camera-pipeline simulator and raw noise-synthesis toolkit."""
 
 
 def _register_commands() -> None:
@@ -31,33 +72,154 @@ def _register_commands() -> None:
             importlib.import_module(f"{commands.__name__}.{mod.name}").register(app)
 
 
+def _metavar(annotation) -> str:
+    """A plain metavar for an option's type: PATH, INT, NUM, TEXT ('' for flags: no value to show)."""
+    import typing
+    from pathlib import Path
+
+    while typing.get_origin(annotation) in (typing.Union, list) or str(typing.get_origin(annotation)) == \
+            "<class 'types.UnionType'>":
+        args = [a for a in typing.get_args(annotation) if a is not type(None)]
+        annotation = args[0] if args else str
+    return {bool: "", Path: "PATH", int: "INT", float: "NUM", str: "TEXT"}.get(annotation, "VALUE")
+
+
+def _plain_metavars(typer_app: typer.Typer) -> None:
+    """Options show PATH / INT / NUM / TEXT (typer >= 0.2x would print <path>, <list[str]>, <bool>)."""
+    import inspect
+    import typing
+
+    for info in typer_app.registered_commands:
+        fn = info.callback
+        hints = typing.get_type_hints(fn)
+        for name, param in inspect.signature(fn).parameters.items():
+            d = param.default
+            if isinstance(d, typer.models.OptionInfo) and d.metavar is None:
+                d.metavar = _metavar(hints.get(name, str))
+    for group in typer_app.registered_groups:
+        _plain_metavars(group.typer_instance)
+
+
 _register_commands()
+_plain_metavars(app)
+
+
+def _click_exceptions() -> ModuleType:
+    """The ``exceptions`` module of the click that typer runs on (``typer._click`` or ``click``)."""
+    package = typer.BadParameter.__module__.rpartition(".")[0]  # "typer._click.exceptions" -> "typer._click"
+    return importlib.import_module(f"{package}.exceptions")
+
+
+def _classes(module: ModuleType, name: str, *extra: type) -> tuple[type, ...]:
+    """``module.name`` (when this click has it) together with ``extra``, as an ``except`` tuple."""
+    found = getattr(module, name, None)
+    return tuple(c for c in (found, *extra) if isinstance(c, type))
+
+
+def _command_name(argv: list[str]) -> str:
+    """``simcam render`` / ``simcam profile import-darktable``: the words before the first option or argument."""
+    words = ["simcam"]
+    group = typer.main.get_command(app)
+    for arg in argv:
+        if arg.startswith("-"):
+            continue
+        sub = getattr(group, "commands", {}).get(arg) if hasattr(group, "commands") else None
+        if sub is None:
+            break
+        words.append(arg)
+        group = sub
+    return " ".join(words)
+
+
+def _usage_hint(exc) -> str:
+    ctx = getattr(exc, "ctx", None)
+    if ctx is None:
+        return "usage: simcam COMMAND [OPTIONS] ... (simcam --help)"
+    import re
+
+    usage = " ".join(ctx.get_usage().replace("Usage:", "").split())
+    usage = re.sub(r"\{(\w+)\}", lambda m: m.group(1).upper(), usage)  # typer >= 0.2x writes {input}
+    return f"usage: {usage} ({ctx.command_path} --help)"
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point: run the app, turning SimcamError into one line and exit code 2."""
+    """Run the app; turn every failure into one line on stderr and an exit code.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Arguments without the program name (default ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        0 on success, 2 for bad input or usage, 1 for an internal error, 130 when interrupted.
+    """
+    import warnings
+
+    from .errors import SimcamWarning
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv or os.environ.get("SIMCAM_DEBUG", "") not in ("", "0")
+    name = _command_name(argv)
+    if not argv:  # the help, as a usage error (click < 8.2 would exit 0 here, >= 8.2 exits 2)
+        argv = ["--help"]
+        usage_only = True
+    else:
+        usage_only = False
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        # simcam's own warnings: one line each; a library's only with --debug (never raw)
+        if issubclass(category, SimcamWarning) or debug:
+            print(f"{name}: warning: {' '.join(str(message).split())}", file=sys.stderr)
+
+    with warnings.catch_warnings():
+        warnings.showwarning = show
+        warnings.simplefilter("default")
+        return _dispatch(argv, name=name, debug=debug, usage_only=usage_only)
+
+
+def _dispatch(argv: list[str], *, name: str, debug: bool, usage_only: bool) -> int:
+    """Run the app once; map every outcome to (one line on stderr and) an exit status."""
     from .errors import SimcamError
 
+    ce = _click_exceptions()
     try:
-        app(args=argv, standalone_mode=False)
+        rv = app(args=argv, prog_name="simcam", standalone_mode=False)
     except SimcamError as exc:
-        print(f"simcam: error: {exc}", file=sys.stderr)
+        print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("simcam: interrupted", file=sys.stderr)
+        print(f"{name}: interrupted", file=sys.stderr)
         return 130
-    except Exception as exc:  # click usage errors and friends
-        import click
-
-        if isinstance(exc, click.exceptions.Exit):
-            return exc.exit_code
-        if isinstance(exc, click.ClickException):
-            exc.show()
+    except _classes(ce, "Exit", typer.Exit) as exc:
+        return 2 if usage_only else int(getattr(exc, "exit_code", 0) or 0)
+    except ce.UsageError as exc:
+        if type(exc).__name__ == "NoArgsIsHelpError":  # help already printed
             return 2
-        if isinstance(exc, click.exceptions.Abort):
-            return 1
-        raise
-    return 0
+        print(f"{name}: error: {' '.join(exc.format_message().split())}", file=sys.stderr)
+        print(_usage_hint(exc), file=sys.stderr)
+        return 2
+    except ce.ClickException as exc:  # click's own file / option errors
+        print(f"{name}: error: {' '.join(exc.format_message().split())}", file=sys.stderr)
+        return int(getattr(exc, "exit_code", 2) or 2)
+    except _classes(ce, "Abort", typer.Abort):
+        print(f"{name}: aborted", file=sys.stderr)
+        return 1
+    except Exception as exc:
+        if debug:
+            import traceback
+
+            traceback.print_exc()
+        message = " ".join(str(exc).split()) or "(no message)"
+        print(f"{name}: internal error: {type(exc).__name__}: {message} "
+              "(a bug in simcam; run with --debug or SIMCAM_DEBUG=1 for the traceback)", file=sys.stderr)
+        return 1
+    if usage_only:
+        return 2
+    return rv if isinstance(rv, int) and not isinstance(rv, bool) else 0
+
+
 
 
 def entry() -> None:  # console_scripts target

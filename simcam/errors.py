@@ -70,3 +70,11 @@ def require_extra(module: str, extra: str):
         raise OptionalDependencyError(
             f"{module} is needed for this feature: pip install 'simcam[{extra}]' ({exc})"
         ) from None
+
+
+class SimcamWarning(UserWarning):
+    """Something simcam did not do and says so (an optional DNG opcode it cannot apply, ...)."""
+
+
+class OutputError(SimcamError):
+    """An output path cannot be written as asked (a folder where a file is expected, a missing folder, an input)."""

@@ -21,7 +21,7 @@ from __future__ import annotations
 import json
 import re
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Callable, Iterable
 
 import numpy as np
 import yaml
@@ -30,6 +30,7 @@ from pydantic import ValidationError
 from .errors import PipelineError, SimcamError
 from .frame import SIGNAL_KINDS, RawFrame
 from .stages.base import Stage, get_stage_class
+from .yamlio import load_yaml
 
 PIPELINE_VERSION = 1
 _FLOATISH = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+$")
@@ -92,12 +93,7 @@ class Pipeline:
             source = str(path)
         else:
             text, source = str(text_or_path), "<yaml>"
-        try:
-            doc = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            mark = getattr(exc, "problem_mark", None)
-            loc = f" line {mark.line + 1}" if mark else ""
-            raise PipelineError(f"{source}:{loc} invalid YAML ({getattr(exc, 'problem', exc)})") from None
+        doc = load_yaml(text, source=source, error=PipelineError)
         return cls.from_dict(doc, source=source)
 
     def to_dict(self) -> dict[str, Any]:
@@ -113,7 +109,10 @@ class Pipeline:
         return yaml.safe_dump(self.to_dict(), sort_keys=False, default_flow_style=None)
 
     def with_overrides(self, overrides: dict[str, Any]) -> "Pipeline":
-        """A copy with ``{"stage.param": value}`` overrides (stage by type, or ``type[i]``)."""
+        """A copy with ``{"stage.param": value}`` overrides (stage by type, or ``type[i]``).
+
+        ``param`` may be a dotted path into a nested parameter (``noise.model.beta1``).
+        """
         doc = self.to_dict()
         for key, value in overrides.items():
             if "." not in key:
@@ -130,7 +129,17 @@ class Pipeline:
             pick = int(m.group(2)) if m.group(2) else 0
             if pick >= len(idxs):
                 raise PipelineError(f"--set {key}: only {len(idxs)} stage(s) of type {m.group(1)!r}")
-            doc["stages"][idxs[pick]][param] = value
+            node = doc["stages"][idxs[pick]]
+            *parents, leaf = param.split(".")  # nested: noise.model.beta1 -> node["model"]["beta1"]
+            for j, part in enumerate(parents):
+                child = node.get(part)
+                if child is None:
+                    child = node[part] = {}
+                if not isinstance(child, dict):
+                    raise PipelineError(f"--set {key}: {'.'.join([m.group(1), *parents[:j + 1]])} is "
+                                        f"{type(child).__name__} {child!r}; expected a mapping to set {leaf!r} in")
+                node = child
+            node[leaf] = value
         return Pipeline.from_dict(doc, source=f"{self.source or '<pipeline>'} (with --set)")
 
     # -- checks ------------------------------------------------------------
@@ -147,12 +156,13 @@ class Pipeline:
 
     # -- running -------------------------------------------------------------
     def __call__(self, frame: RawFrame, *, seed: int | None = None, epoch: int = 0,
-                 index: int = 0) -> RawFrame:
+                 index: int = 0, progress: Callable[[str], None] | None = None) -> RawFrame:
         """Run the pipeline on one frame.
 
         Randomness: sample ``index`` of epoch ``epoch`` draws from
         ``np.random.SeedSequence([seed, epoch, index])``; random stage k uses
         the k-th spawned child, so results do not depend on worker count.
+        ``progress``, if given, is called with each stage's type after it ran (a progress bar).
         """
         if frame.kind != self.input_kind:
             raise PipelineError(
@@ -167,6 +177,8 @@ class Pipeline:
             rngs = [np.random.default_rng(c) for c in children]
         for k, stage in enumerate(self.stages):
             frame = stage(frame, rngs[k] if rngs else None)
+            if progress is not None:
+                progress(stage.type)
         return frame
 
     run = __call__

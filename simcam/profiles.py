@@ -36,6 +36,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from .cfa import check_pattern
 from .errors import ProfileError, SimcamError
+from .yamlio import load_yaml
 
 SCHEMA_VERSION = 1
 
@@ -152,7 +153,7 @@ class CalibrationProfile(BaseModel):
             if not extrapolate:
                 raise ProfileError(
                     f"{where}: iso: {iso:g} is outside the calibrated range [{lo:g}, {hi:g}]; expected an ISO inside "
-                    f"it, or pass extrapolate=True (--extrapolate) to extrapolate linearly in log-ISO")
+                    f"it, or allow extrapolation (simcam synth --extrapolate; extrapolate: true in a noise stage) to extrapolate linearly in log-ISO")
             warnings.warn(f"{where}: ISO {iso:g} is outside the calibrated range [{lo:g}, {hi:g}]: extrapolating "
                           f"linearly in log-ISO", ProfileExtrapolationWarning, stacklevel=2)
             if len(isos) == 1:
@@ -247,11 +248,11 @@ def load_profile(path: str | Path) -> CalibrationProfile:
         text = path.read_text()
     except OSError as exc:
         raise ProfileError(f"{path}: cannot read profile ({exc.strerror})") from None
-    try:
-        doc = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        raise ProfileError(f"{path}:{f' line {mark.line + 1}' if mark else ''} invalid YAML ({getattr(exc, 'problem', exc)})") from None
+    doc = load_yaml(text, source=str(path), error=ProfileError)
+    if isinstance(doc, dict):  # measured maps (FILE.npz#KEY) are relative to the profile's folder
+        from .noise.maps import resolve_map_refs
+
+        doc = resolve_map_refs(doc, path.resolve().parent)
     return profile_from_dict(doc, source=str(path))
 
 

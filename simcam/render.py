@@ -78,7 +78,8 @@ def _is_linear(stage) -> bool:
     return stage.type != "tone" or stage.params.curve == "none"
 
 
-def render_samples(pipe, frame: RawFrame, depth: str, *, seed: int | None = None, fuse: bool = True) -> Rendered:
+def render_samples(pipe, frame: RawFrame, depth: str, *, seed: int | None = None, index: int = 0,
+                   progress=None, fuse: bool = True) -> Rendered:
     """Run ``pipe`` on ``frame`` and return ``depth`` samples (``uint8``, ``uint16``, ``float32``, ``half``).
 
     Parameters
@@ -91,6 +92,10 @@ def render_samples(pipe, frame: RawFrame, depth: str, *, seed: int | None = None
         Output sample type.
     seed : int, optional
         Seed for random stages.
+    index : int
+        Item index of the random streams (``SeedSequence([seed, 0, index])``, as the pipeline's).
+    progress : callable, optional
+        Called with each stage's type after it ran (the fused or banded tail's stages together, at its end).
     fuse : bool
         Fuse the display tail (see the module docstring); False runs every stage.
 
@@ -105,19 +110,26 @@ def render_samples(pipe, frame: RawFrame, depth: str, *, seed: int | None = None
     start = fusable_tail(stages) if usable else len(stages)
     if start < len(stages):
         head = _head(pipe, start)
-        frame = head(frame, seed=seed) if head is not None else frame
-        return render_tail(stages[start:], frame, depth)
+        frame = head(frame, seed=seed, index=index, progress=progress) if head is not None else frame
+        return _done(render_tail(stages[start:], frame, depth), stages[start:], progress)
     start = banded_tail(stages) if usable else len(stages)
     if start < len(stages):
         head = _head(pipe, start)
-        frame = head(frame, seed=seed) if head is not None else frame
+        frame = head(frame, seed=seed, index=index, progress=progress) if head is not None else frame
         if frame.data.ndim == 3:
-            return render_banded(stages[start:], frame, depth)
+            return _done(render_banded(stages[start:], frame, depth), stages[start:], progress)
         for st in stages[start:]:  # a mosaic (e.g. a clip after normalize): per-pixel, but not RGB bands
             frame = st(frame)
-        return Rendered(to_samples(frame.data, depth), frame.kind, frame.meta, depth)
-    out = pipe(frame, seed=seed)
+        return _done(Rendered(to_samples(frame.data, depth), frame.kind, frame.meta, depth), stages[start:], progress)
+    out = pipe(frame, seed=seed, index=index, progress=progress)
     return Rendered(to_samples(out.data, depth), out.kind, out.meta, depth)
+
+
+def _done(rendered: Rendered, tail, progress) -> Rendered:
+    if progress is not None:
+        for st in tail:
+            progress(st.type)
+    return rendered
 
 
 def banded_tail(stages) -> int:

@@ -109,7 +109,7 @@ def test_cli_info_bad_file_in_process(capsys):
     path = shared_path("dng/gopro_hero7_vc5_compressed.gpr")
     assert main(["info", str(path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("simcam: error:") and "Compression" in err[0]
+    assert len(err) == 1 and err[0].startswith("simcam info: error:") and "Compression" in err[0]
 
 
 def test_cli_info_bad_inputs(tmp_path, capsys):

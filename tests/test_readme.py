@@ -21,3 +21,16 @@ def test_readme_has_two_setup_commands_and_ci_runs_them():
           if line.strip() and not line.lstrip().startswith("#")]
     for cmd in cmds:
         assert cmd in ci, f"README command not run by .ci/run: {cmd}"
+
+
+def test_python_quick_start_runs_as_written(tmp_path, monkeypatch):
+    """The README's Python quick start, executed as a user would paste it (from the repo root)."""
+    text = (REPO / "README.md").read_text()
+    section = text.split("### Python quick start", 1)[1]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    monkeypatch.chdir(REPO)
+    ns: dict = {}
+    exec(compile(code, "README.md: Python quick start", "exec"), ns)  # noqa: S102 - our own README
+    assert ns["rgb"].ndim == 3 and ns["png8"].dtype.name == "uint8"
+    assert ns["noisy"].shape == ns["raw"].data.shape
+    assert tuple(ns["batch"]["noisy"].shape) == (8, 4, 64, 64)

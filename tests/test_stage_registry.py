@@ -35,6 +35,8 @@ STAGE_CASES: dict[str, tuple[dict, str]] = {
     "quantize": ({"bits": 8}, "display"),
     "noise": ({"model": {"type": "nlf", "beta1": 1.0e-3, "beta2": 1.0e-5}}, "raw"),
     "clip_raw": ({}, "raw"),
+    "highlights": ({"method": "propagate"}, "raw"),
+    "opcodes": ({"list": 2}, "raw"),
 }
 
 

@@ -24,8 +24,12 @@ def _outputs(outputs: list[Path]) -> tuple[Optional[Path], Optional[Path]]:
 
 
 def gt(
-    burst_dir: Path = typer.Argument(..., help="Directory of the burst's frames (DNG, or PNG/TIFF for a mono sensor)."),
-    output: list[Path] = typer.Option(..., "-o", "--output", help="OUT.npz (gt, sigma, defects, valid) and/or OUT.dng; repeatable."),
+    burst_dir: list[Path] = typer.Argument(..., metavar="BURST_DIR...",
+                                           help="Folder of the burst's frames (DNG, or PNG/TIFF for a mono sensor); "
+                                                "several folders, or one folder of burst folders, for a batch."),
+    output: list[Path] = typer.Option(..., "-o", "--output",
+                                      help="OUT.npz (gt, sigma, defects, valid) and/or OUT.dng; repeatable. "
+                                           "Batch: the output folder."),
     dark: Optional[Path] = typer.Option(None, "--dark", help="Directory of a dark sequence: defective pixels from its mean."),
     flat: Optional[Path] = typer.Option(None, "--flat", help="Directory of a flat sequence: more defective pixels."),
     defects: Optional[Path] = typer.Option(None, "--defects", help="Known defect map (.npz from --save-defects, or SIDD .mat)."),
@@ -43,51 +47,81 @@ def gt(
     nan_policy: str = typer.Option("raise", "--nan-policy", help="NaN samples: raise, or omit (treat as missing)."),
     scratch_dir: Optional[Path] = typer.Option(None, "--scratch-dir", help="Where large bursts spill their working frames."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Progress bars on stderr."),
+    workers: Optional[int] = typer.Option(None, "--workers", min=0,
+                                          help="Batch: dask worker processes (default: one per core; 0: serial)."),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Batch: dask scheduler address."),
+    resume: bool = typer.Option(False, "--resume", help="Batch: skip bursts whose outputs exist."),
 ) -> None:
     """Estimate the noise-free image of a burst: defects, intensity and dense alignment, robust mean."""
-    import json
-
-    from ..dataset.groundtruth import Burst, GroundTruthConfig, estimate_ground_truth, load_defect_map, save_defect_map
+    """Estimate the noise-free image of a burst (or of every burst of a folder, on dask):
+    defects, intensity and dense alignment, robust mean."""
+    from ..dataset.groundtruth.burst import IMAGE_EXTS, RAW_EXTS, is_sidd_frame
     from ..errors import DatasetError
+    from ..io.outputs import check_output_file
+    from ..jobs import ground_truth_job
 
+    settings = dict(dark=_str(dark), flat=_str(flat), defects=_str(defects), method=method, alignment=alignment,
+                    intensity=intensity, patch=patch, interp_order=interp_order, pattern=pattern,
+                    dark_pattern=dark_pattern, black_level=black_level, white_level=white_level,
+                    nan_policy=nan_policy, scratch_dir=_str(scratch_dir))
+    frame_exts = RAW_EXTS + IMAGE_EXTS
+    single = len(burst_dir) == 1 and (not burst_dir[0].is_dir() or pattern is not None or any(
+        (p.is_file() and p.suffix.lower() in frame_exts) or is_sidd_frame(p) for p in burst_dir[0].iterdir()))
+    if not single:
+        if len(output) != 1 or output[0].suffix:
+            raise DatasetError(f"-o {' '.join(map(str, output))}: several bursts; expected one output folder "
+                               "(OUT/<burst>.npz and OUT/<burst>.json are written)")
+        if save_defects is not None or report is not None:
+            raise DatasetError("--save-defects / --report: one burst only; a batch writes OUT/<burst>.json reports")
+        raise typer.Exit(_gt_batch(burst_dir, output[0], settings, workers=workers, scheduler=scheduler,
+                                   resume=resume))
     npz, dng = _outputs(output)
-    kw = dict(black_level=black_level, white_level=white_level, nan_policy=nan_policy)
-    burst = Burst.from_directory(burst_dir, pattern=pattern, **kw)
-    inputs = {p.resolve() for p in map(Path, burst.names)}
-    for o in output:
-        if o.resolve() in inputs:
-            raise DatasetError(f"{o}: refusing to overwrite an input frame")
-    dark_b = Burst.from_directory(dark, pattern=dark_pattern, **kw) if dark is not None else None
-    flat_b = Burst.from_directory(flat, **kw) if flat is not None else None
-    known = load_defect_map(defects) if defects is not None else None
-    cfg = GroundTruthConfig(method=method, alignment=alignment, intensity=intensity, patch=patch,
-                            interp_order=interp_order, scratch_dir=str(scratch_dir) if scratch_dir else None)
-    res = estimate_ground_truth(burst, dark=dark_b, flat=flat_b, defects=known, config=cfg, progress=progress)
-    written = []
-    if npz is not None:
-        res.save_npz(npz)
-        written.append(str(npz))
-    if dng is not None:
-        from ..dataset.groundtruth.dngout import write_ground_truth_dng
+    for o, opt in [(o, "-o") for o in output] + [(save_defects, "--save-defects"), (report, "--report")]:
+        if o is not None:
+            check_output_file(o, option=opt, inputs=(defects,))
+    if save_defects is not None and save_defects.suffix.lower() != ".npz":
+        raise DatasetError(f"{save_defects}: --save-defects: expected a .npz path")
+    info = ground_truth_job({**settings, "burst": str(burst_dir[0]), "npz": _str(npz), "dng": _str(dng),
+                             "save_defects": _str(save_defects),
+                             "report": str(report or Path(output[0]).with_suffix(".json")), "progress": progress})
+    typer.echo(info["summary"])
 
-        write_ground_truth_dng(dng, res, burst)
-        written.append(str(dng))
-    if save_defects is not None:
-        from ..dataset.groundtruth import DefectMap
 
-        save_defect_map(save_defects, DefectMap(res.defects, "simcam gt", res.report["defects"].get("planes", [])))
-        written.append(str(save_defects))
-    rep_path = report or Path(output[0]).with_suffix(".json")
-    rep = dict(res.report, inputs={"burst": str(burst_dir), "dark": str(dark) if dark else None,
-                                   "flat": str(flat) if flat else None, "defects": str(defects) if defects else None},
-               outputs=written)
-    rep_path.write_text(json.dumps(rep, indent=2))
-    a = res.report["alignment"]
-    typer.echo(
-        f"ground truth of {burst_dir}: {res.report['frames_used']}/{res.report['frames']} frames "
-        f"(dropped {[d['index'] for d in res.report['dropped']]}), reference {res.reference}, "
-        f"{res.report['defects']['count']} defective pixels, alignment {a['mode']} max shift {a['max_shift_px']:.2f} px, "
-        f"{res.report['robust_mean']['fallback_pixels']} fallback pixels; wrote {', '.join(written)} and {rep_path}")
+def _str(p) -> Optional[str]:
+    return None if p is None else str(p)
+
+
+def _gt_batch(inputs: list[Path], out_dir: Path, settings: dict, *, workers, scheduler, resume) -> int:
+    from ..batch import BatchConfig, Task, report, run_batch
+    from ..errors import DatasetError
+    from ..io.outputs import check_output_dir
+    from ..jobs import ground_truth_job
+
+    bursts: list[Path] = []
+    for item in inputs:
+        if not item.is_dir():
+            raise DatasetError(f"{item}: burst folder not found")
+        subs = sorted(p for p in item.iterdir() if p.is_dir())
+        bursts.extend(subs if subs and len(inputs) == 1 else [item])
+    if not bursts:
+        raise DatasetError(f"{inputs[0]}: no burst sub-folders; expected one folder of frames per burst")
+    names = [b.name for b in bursts]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise DatasetError(f"bursts: several folders named {dup}; expected distinct burst names")
+    check_output_dir(out_dir, option="-o", inputs=bursts)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    tasks = [Task(str(b), {**settings, "burst": str(b), "npz": str(out_dir / f"{b.name}.npz"), "dng": None,
+                           "save_defects": None, "report": str(out_dir / f"{b.name}.json"), "progress": False},
+                  outputs=(str(out_dir / f"{b.name}.npz"), str(out_dir / f"{b.name}.json")))
+             for b in bursts]
+    outcomes = run_batch(ground_truth_job, tasks, BatchConfig(workers=workers, scheduler=scheduler, resume=resume),
+                         label="gt")
+    for o in outcomes:
+        if o.ok and not o.skipped:
+            typer.echo(o.info["summary"])
+    typer.echo(f"ground truth of {sum(o.ok for o in outcomes)} of {len(tasks)} bursts in {out_dir}")
+    return report(outcomes, command="simcam gt")
 
 
 def register(app: typer.Typer) -> None:

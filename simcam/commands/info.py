@@ -49,7 +49,7 @@ def format_meta(d: dict) -> list[str]:
 
 
 def info(
-    file: Path = typer.Argument(..., help="A DNG file or a SIDD *_METADATA_RAW_*.MAT file."),
+    file: Path = typer.Argument(..., metavar="FILE", help="A DNG file or a SIDD *_METADATA_RAW_*.MAT file."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of text."),
 ) -> None:
     """Print every parsed metadata field of a DNG (or SIDD .MAT) file."""

@@ -7,18 +7,25 @@ from typing import Optional
 
 import typer
 
-profile_app = typer.Typer(help="Noise calibration profiles: import, inspect.", no_args_is_help=True)
+profile_app = typer.Typer(help="Noise calibration profiles: import, inspect.", no_args_is_help=True,
+                          rich_markup_mode=None)
 
 
-def _emit(prof, output: Optional[Path], inputs: tuple[Path, ...]) -> None:
-    from ..errors import ProfileError
+def _check(output: Optional[Path], inputs: tuple[Path, ...]) -> None:
+    from ..io.outputs import check_output_file
 
+    if output is not None:
+        check_output_file(output, option="-o", inputs=inputs, suffixes=(".yaml", ".yml"))
+
+
+def _emit(prof, output: Optional[Path]) -> None:
+    notes = getattr(prof.provenance, "notes", "") or ""
+    for note in notes.split("; "):
+        if " skipped: " in note:
+            typer.echo(f"note: {note}", err=True)
     if output is None:
         typer.echo(prof.to_yaml(), nl=False)
         return
-    for p in inputs:
-        if output.exists() and p.exists() and output.resolve() == p.resolve():
-            raise ProfileError(f"{output}: refusing to overwrite the input file")
     prof.save(output)
     cam = prof.cameras[0]
     typer.echo(f"wrote {output} (camera {cam.id!r}, {len(cam.entries)} ISO entries "
@@ -27,7 +34,7 @@ def _emit(prof, output: Optional[Path], inputs: tuple[Path, ...]) -> None:
 
 @profile_app.command("import-darktable")
 def import_darktable_cmd(
-    file: Path = typer.Argument(..., help="darktable noiseprofiles.json"),
+    file: Path = typer.Argument(..., metavar="FILE", help="darktable noiseprofiles.json"),
     camera: str = typer.Option(..., "--camera", help='Camera as darktable names it: "MAKE MODEL", e.g. "Sony ILCE-7M3".'),
     cfa: str = typer.Option("RGGB", "--cfa", help="Bayer pattern that maps the per-colour values to CFA sites."),
     camera_id: Optional[str] = typer.Option(None, "--id", help="Camera id in the profile (default: MAKE MODEL)."),
@@ -36,24 +43,26 @@ def import_darktable_cmd(
     """Convert a darktable noise profile (a, b per RGB) to a simcam profile (nlf per ISO)."""
     from ..noise.importers import import_darktable
 
-    _emit(import_darktable(file, camera, cfa=cfa, camera_id=camera_id), output, (file,))
+    _check(output, (file,))
+    _emit(import_darktable(file, camera, cfa=cfa, camera_id=camera_id), output)
 
 
 @profile_app.command("from-dng")
 def from_dng_cmd(
-    file: Path = typer.Argument(..., help="DNG with a NoiseProfile tag."),
+    file: Path = typer.Argument(..., metavar="FILE", help="DNG with a NoiseProfile tag."),
     camera_id: Optional[str] = typer.Option(None, "--id", help="Camera id in the profile (default: MAKE MODEL)."),
     output: Optional[Path] = typer.Option(None, "-o", "--output", help="Profile YAML to write (default: stdout)."),
 ) -> None:
     """Build a one-ISO profile from a DNG's NoiseProfile tag."""
     from ..noise.importers import profile_from_dng
 
-    _emit(profile_from_dng(file, camera_id=camera_id), output, (file,))
+    _check(output, (file,))
+    _emit(profile_from_dng(file, camera_id=camera_id), output)
 
 
 @profile_app.command("show")
 def show_cmd(
-    file: Path = typer.Argument(..., help="Profile YAML."),
+    file: Path = typer.Argument(..., metavar="FILE", help="Profile YAML."),
     iso: Optional[float] = typer.Option(None, "--iso", help="Print the (interpolated) model at this ISO."),
     camera: Optional[str] = typer.Option(None, "--camera", help="Camera id."),
     extrapolate: bool = typer.Option(False, "--extrapolate", help="Allow ISOs outside the calibrated range."),

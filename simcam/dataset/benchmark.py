@@ -226,6 +226,29 @@ def run_benchmark(noisy, gt, denoiser: str | Callable = "none", *,
     return BenchmarkResult(name, raw, srgb, seconds / (pixels / 1e6), per_block, settings)
 
 
+def merge_results(parts: Sequence[BenchmarkResult], images: Sequence[int]) -> BenchmarkResult:
+    """One result from per-image results of one denoiser (a batch splits the images).
+
+    ``parts[k]`` scored image ``images[k]`` alone (its blocks carry image 0); the merged result
+    renumbers them and recomputes the means and seconds per megapixel exactly as
+    :func:`run_benchmark` does over all the blocks at once.
+    """
+    from dataclasses import replace
+
+    if not parts:
+        raise DatasetError("merge_results: no partial results")
+    per_block = [replace(b, image=int(i)) for part, i in zip(parts, images) for b in part.per_block]
+    srgb_track = parts[0].settings.get("track") == "srgb"
+    raw = None if srgb_track else {"psnr": _mean([b.psnr_raw for b in per_block if b.psnr_raw != math.inf]),
+                                   "ssim": _mean([b.ssim_raw for b in per_block])}
+    srgb_p = _mean([b.psnr_srgb for b in per_block if b.psnr_srgb != math.inf])
+    srgb = None if srgb_p is None else {"psnr": srgb_p, "ssim": _mean([b.ssim_srgb for b in per_block])}
+    seconds = float(sum(b.seconds for b in per_block))
+    mp = sum(sum(b.seconds for b in p.per_block) / p.seconds_per_mp for p in parts if p.seconds_per_mp > 0)
+    settings = dict(parts[0].settings, images=len(parts), blocks=len(per_block))
+    return BenchmarkResult(parts[0].denoiser, raw, srgb, seconds / mp if mp > 0 else 0.0, per_block, settings)
+
+
 # ------------------------------------------------------------------------------- leaderboard
 _BOARD_TAG = re.compile(r"<!-- simcam-leaderboard (\{.*?\}) -->", re.DOTALL)
 

@@ -190,6 +190,10 @@ def write_image(path: str | Path, data, *, depth: str | int | None = None,
     h, w, c = samples.shape
     type_desc = {"uint8": oiio.UINT8, "uint16": oiio.UINT16, "float32": oiio.FLOAT, "half": oiio.HALF}[dtype]
     spec = oiio.ImageSpec(w, h, c, type_desc)
+    # OpenImageIO stamps TIFF/EXR with the write time unless told otherwise: the same render
+    # would give different bytes on every run. No DateTime unless the caller (or the capture's
+    # DateTimeOriginal, below) gives one.
+    spec.attribute("DateTime", "")
     ext = path.suffix.lower()
     if comp is not None:
         spec.attribute("compression", comp)

@@ -62,12 +62,15 @@ class NoiseCondition:
         unknown layout (then only site-independent parameters can be used).
     source : str
         Where the data came from (for error messages).
+    exposure_s : float or None
+        Exposure time in seconds (exposure-dependent effects: ``dark_current``, ``amp_glow``).
     """
 
     iso: float | None = None
     camera: str | None = None
     cfa: str | None = "RGGB"
     source: str = ""
+    exposure_s: float | None = None
 
     def __post_init__(self) -> None:
         if self.cfa is not None:

@@ -63,13 +63,15 @@ class Clipped(NoiseModel):
         x = check_same_shape(noisy, clean).astype(np.float64)
         if not hasattr(self.base, "cdf"):
             raise NoiseModelError(f"model 'clipped': base {self.base.type!r} has no CDF, the censored likelihood needs one")
-        if (x < self.low).any() or (x > self.high).any():
+        # samples are clipped at the float32 bounds (sample() works in float32): 0.6 is stored as 0.6000000238
+        lo32, hi32 = float(np.float32(self.low)), float(np.float32(self.high))
+        if (x < min(self.low, lo32)).any() or (x > max(self.high, hi32)).any():
             raise NoiseModelError(
                 f"{cond.source or 'noisy'}: expected clipped values in [{self.low}, {self.high}], got range "
                 f"[{x.min():.6g}, {x.max():.6g}]")
         out = np.empty(clean.shape, dtype=np.float64)
-        at_lo = x <= self.low
-        at_hi = x >= self.high
+        at_lo = x <= max(self.low, lo32)
+        at_hi = x >= min(self.high, hi32)
         inside = ~(at_lo | at_hi)
         if inside.any():
             out[inside] = self.base.log_prob(x, clean, cond)[inside]

@@ -201,7 +201,7 @@ class Composite(NoiseModel):
 
     def _ctx(self, cond, key, i, fixed, frames, signal, read=None):
         return EffectContext(cfa=cond.cfa, key=key, stream=1 + i, fixed=fixed[i], frame=frames[i] if frames else {},
-                             signal=signal, read=read)
+                             signal=signal, read=read, exposure_s=cond.exposure_s)
 
     # -- likelihood -------------------------------------------------------------
     def log_prob(self, noisy, clean, cond: NoiseCondition) -> np.ndarray:
@@ -223,7 +223,7 @@ class Composite(NoiseModel):
         for i, e in enumerate(self.effects):
             if e.stage == "signal":
                 signal = e.apply(signal, EffectContext(cfa=cond.cfa, key=None, stream=1 + i, fixed=fixed[i], frame={},
-                                                       signal=signal))
+                                                       signal=signal, exposure_s=cond.exposure_s))
         log_jac = np.zeros(clean.shape, dtype=np.float64)
         for i in reversed(range(len(self.effects))):
             e = self.effects[i]
@@ -233,7 +233,8 @@ class Composite(NoiseModel):
                 y = e.inverse(y)
                 log_jac += e.log_slope(y)
             else:
-                ctx = EffectContext(cfa=cond.cfa, key=None, stream=1 + i, fixed=fixed[i], frame={}, signal=signal)
+                ctx = EffectContext(cfa=cond.cfa, key=None, stream=1 + i, fixed=fixed[i], frame={}, signal=signal,
+                                    exposure_s=cond.exposure_s)
                 y = y - e.apply(np.zeros(clean.shape, dtype=np.float32), ctx)
         return self.base.log_prob(y, signal, cond) - log_jac
 

@@ -88,14 +88,18 @@ def import_darktable(path: str | Path, camera: str, *, cfa: str = "RGGB", camera
         by_iso.setdefault(iso, []).append((a, b))
     if not by_iso:
         raise ProfileError(f"{path}: {camera}: no profiles")
-    entries, clamped, averaged = [], [], []
+    entries, clamped, averaged, skipped = [], [], [], []
     for iso in sorted(by_iso):
         a = np.mean([x[0] for x in by_iso[iso]], axis=0)
         b = np.mean([x[1] for x in by_iso[iso]], axis=0)
         if len(by_iso[iso]) > 1:
             averaged.append(iso)
-        if (a < 0).any():
-            raise ProfileError(f"{path}: {camera}: ISO {iso:g}: negative shot-noise slope a {a.tolist()}")
+        if (a < 0).any() or not np.isfinite(a).all() or not np.isfinite(b).all():
+            # darktable's fit can go negative where the shot-noise term is unidentifiable; such an
+            # entry is no noise model: skip it (named in the notes) and keep the valid ISOs
+            skipped.append(f"ISO {iso:g} skipped: shot-noise slope a = {[float(f'{v:.4g}') for v in a]} "
+                           "(expected a >= 0 for every colour)")
+            continue
         if (b < 0).any():
             clamped.append(iso)
             b = np.maximum(b, 0.0)
@@ -106,6 +110,9 @@ def import_darktable(path: str | Path, camera: str, *, cfa: str = "RGGB", camera
         notes.append(f"ISOs measured twice, averaged: {[int(i) if i.is_integer() else i for i in averaged]}")
     if clamped:
         notes.append(f"negative b set to 0 at ISOs {[int(i) if i.is_integer() else i for i in clamped]}")
+    notes += skipped
+    if not entries:
+        raise ProfileError(f"{path}: {camera}: no valid profile; " + "; ".join(skipped))
     return profile_from_dict({
         "schema_version": 1,
         "provenance": {

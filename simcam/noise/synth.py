@@ -40,8 +40,12 @@ XYZ_TO_SRGB = np.array([[3.2406, -1.5372, -0.4986], [-0.9689, 1.8758, 0.0415], [
 
 
 def load_clean(path: str | Path, *, as_: str = "raw", profile=None, camera: str | None = None,
-               iso: float | None = None, cfa: str | None = None) -> RawFrame:
-    """The clean input as a normalised-raw frame (see module docstring)."""
+               iso: float | None = None, cfa: str | None = None, notes: list[str] | None = None) -> RawFrame:
+    """The clean input as a normalised-raw frame (see module docstring).
+
+    A DNG's samples below black (a real raw used as the clean image carries its own noise) are
+    set to 0, and a line saying how many is appended to ``notes``.
+    """
     path = Path(path)
     if not path.exists():
         raise ImageIOError(f"{path}: no such file")
@@ -51,6 +55,13 @@ def load_clean(path: str | Path, *, as_: str = "raw", profile=None, camera: str 
 
         frame = read_dng(path)
         out = Normalize()(frame)
+        # a real raw used as the clean image carries its own noise: samples below black are
+        # expected-signal estimates under 0, which no noise model accepts; they become 0
+        below = out.data < 0
+        if below.any():
+            out = out.evolve(data=np.maximum(out.data, np.float32(0)))
+            if notes is not None:
+                notes.append(f"{path}: {int(below.sum())} samples below black set to 0 (a clean signal is >= 0)")
         if iso is not None:
             out = out.evolve(meta=out.meta.replace(iso=float(iso)))
         return out
@@ -78,6 +89,9 @@ def load_clean(path: str | Path, *, as_: str = "raw", profile=None, camera: str 
         meta.as_shot_neutral = np.ones(3)
     if mosaic.shape[0] % 2 or mosaic.shape[1] % 2:
         raise ImageIOError(f"{path}: expected even height and width for a Bayer mosaic, got {mosaic.shape}")
+    bad = int(np.count_nonzero(~np.isfinite(mosaic)))
+    if bad:
+        raise ImageIOError(f"{path}: pixels: {bad} NaN or infinite samples; expected finite values")
     return RawFrame(np.ascontiguousarray(mosaic, dtype=np.float32), meta, kind="raw")
 
 
@@ -134,14 +148,23 @@ def synth(clean: RawFrame, out_dir: str | Path, *, stage, frames: int, seed: int
     from ..noise.importers import model_noise_profile
 
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    created = not out_dir.exists()
     nlf = model_noise_profile(stage.model, clean.meta.cfa)
     meta = clean.meta if nlf is None else clean.meta.replace(noise_profile=nlf)
     base = clean.evolve(meta=meta)
-    written = [write_dng(out_dir / "clean.dng", base, protect=protect)]
-    it = range(int(frames))
-    for i in (progress(it) if progress else it):
-        rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0, i]).spawn(1)[0])
-        noisy = stage(base, rng)
-        written.append(write_dng(out_dir / f"frame_{i:03d}.dng", noisy, protect=protect))
+    written: list[Path] = []
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        written.append(write_dng(out_dir / "clean.dng", base, protect=protect))
+        it = range(int(frames))
+        for i in (progress(it) if progress else it):
+            rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0, i]).spawn(1)[0])
+            noisy = stage(base, rng)
+            written.append(write_dng(out_dir / f"frame_{i:03d}.dng", noisy, protect=protect))
+    except BaseException:
+        for p in written:  # nothing partial: what this call wrote goes
+            p.unlink(missing_ok=True)
+        if created and out_dir.exists() and not any(out_dir.iterdir()):
+            out_dir.rmdir()
+        raise
     return written

@@ -38,6 +38,8 @@ class Noise(Stage):
         extrapolate: bool = False
         model: Optional[dict[str, Any]] = None
         sensor_seed: Optional[int] = None
+        #: exposure time (s) for exposure-dependent effects; default: the frame's ExposureTime
+        exposure_s: Optional[float] = None
         chunk_rows: Optional[int] = None
         threads: int = 1
 
@@ -80,8 +82,10 @@ class Noise(Stage):
             raise StageError(
                 f"{frame.meta.source or 'frame'}: cfa: the profile {self.params.profile} calibrates camera "
                 f"{self.params.camera or ''} with CFA {self._cam_cfa}, the frame is {cfa}")
+        exposure = self.params.exposure_s if self.params.exposure_s is not None else frame.meta.exposure_time_s
         return NoiseCondition(iso=self.params.iso if self.params.iso is not None else frame.meta.iso,
-                              camera=self.params.camera, cfa=cfa, source=frame.meta.source)
+                              camera=self.params.camera, cfa=cfa, source=frame.meta.source,
+                              exposure_s=None if exposure is None else float(exposure))
 
     def sample(self, rng: np.random.Generator, frame: RawFrame) -> dict[str, Any]:
         noisy = self.model.sample(frame.data, self.condition(frame), rng, chunk_rows=self.params.chunk_rows,

@@ -2,7 +2,12 @@
 
 Gains come from the capture's white (AsShotNeutral, or AsShotWhiteXY through the
 colour matrices, DNG 1.6 chapter 6), from an explicit camera ``neutral``
-(gains = 1 / neutral) or are given directly; they are normalised so that G = 1.
+(gains = 1 / neutral), are given directly, or are estimated from the image
+(``grey_world``: the mean of every channel is grey, Buchsbaum 1980; ``white_patch``: the
+brightest unclipped surfaces are white — a robust max-RGB, Land's retinex white patch, taking
+the mean of the brightest ``white_patch_fraction`` of the unclipped 2x2 cells instead of the
+single maximum), or from a ``spot`` (a rectangle known to be neutral, as darktable's spot
+mode: a grey card); they are normalised so that G = 1.
 The gains applied are recorded (multiplied into any earlier ones) in a copy of the
 metadata as ``meta.white_balance_gains`` so later colour stages can undo them.
 """
@@ -48,6 +53,49 @@ def apply_gains(frame: RawFrame, gains: np.ndarray) -> np.ndarray:
     return out
 
 
+def cell_rgb(frame: RawFrame) -> np.ndarray:
+    """(N, 3) float64 R, G, B of every 2x2 CFA cell (the two greens averaged), or of every pixel of camera RGB."""
+    d = np.asarray(frame.data)
+    if d.ndim == 3:
+        return d.reshape(-1, d.shape[2])[:, :3].astype(np.float64)
+    if frame.meta.cfa is None:
+        raise StageError(f"{frame.meta.source or 'frame'}: cfa: automatic white balance of a mosaic needs meta.cfa")
+    h, w = (d.shape[0] // 2) * 2, (d.shape[1] // 2) * 2
+    idx = site_colour_index(frame.meta.cfa)
+    out = np.zeros(((h // 2) * (w // 2), 3))
+    count = np.zeros(3)
+    for dy in range(2):
+        for dx in range(2):
+            out[:, idx[dy, dx]] += d[dy:h:2, dx:w:2].astype(np.float64).ravel()
+            count[idx[dy, dx]] += 1
+    return out / count
+
+
+def estimate_neutral(frame: RawFrame, method: str, *, clip_level: float = 0.98, fraction: float = 0.01) -> np.ndarray:
+    """The camera neutral (G = 1) that makes the scene's average (grey world) or its brightest unclipped
+    surfaces (white patch) grey; cells with a clipped channel or without signal are left out.
+
+    Raises
+    ------
+    StageError
+        Fewer than 16 usable cells, or a channel without signal.
+    """
+    rgb = cell_rgb(frame)
+    ok = np.isfinite(rgb).all(1) & (rgb.max(1) < clip_level) & (rgb.min(1) > 0)
+    src = frame.meta.source or "frame"
+    if ok.sum() < 16:
+        raise StageError(f"{src}: white_balance {method}: {int(ok.sum())} unclipped cells with signal; expected >= 16")
+    use = rgb[ok]
+    if method == "white_patch":
+        lum = use.sum(1)
+        k = max(16, int(np.ceil(fraction * lum.size)))
+        use = use[np.argpartition(lum, lum.size - k)[lum.size - k:]]
+    neutral = use.mean(0)
+    if not (neutral > 0).all():
+        raise StageError(f"{src}: white_balance {method}: a channel has no signal (means {neutral.tolist()})")
+    return neutral / neutral[1]
+
+
 @register_stage
 class WhiteBalance(Stage):
     """White balance by channel gains (G = 1); records them as ``meta.white_balance_gains``.
@@ -61,11 +109,17 @@ class WhiteBalance(Stage):
     accepts = frozenset({"raw", "camera_rgb"})
 
     class Params(StageParams):
-        source: Literal["as_shot", "neutral", "gains", "none"] = "as_shot"
+        source: Literal["as_shot", "neutral", "gains", "grey_world", "white_patch", "spot", "none"] = "as_shot"
+        #: source: spot: [top, left, bottom, right] in pixels of the frame (a neutral surface)
+        spot: Optional[tuple[int, int, int, int]] = None
         #: camera neutral (R, G, B) in stored-value space, > 0; with source: neutral
         neutral: Optional[tuple[float, float, float]] = None
         #: gains (R, G, B), > 0; normalised so G = 1; with source: gains
         gains: Optional[tuple[float, float, float]] = None
+        #: auto white balance: cells with any channel at or above this (normalised) level are clipped
+        clip_level: float = 0.98
+        #: white_patch: share of the brightest unclipped cells averaged as the white
+        white_patch_fraction: float = 0.01
 
     def __init__(self, params=None, **kw):
         super().__init__(params, **kw)
@@ -76,7 +130,14 @@ class WhiteBalance(Stage):
             raise StageError("white_balance: neutral: expected [r, g, b] with source: neutral")
         if p.source == "gains" and p.gains is None:
             raise StageError("white_balance: gains: expected [r, g, b] with source: gains")
-        if p.source == "none" and (p.neutral is not None or p.gains is not None):
+        if not 0 < p.clip_level <= 1 or not 0 < p.white_patch_fraction <= 0.5:
+            raise StageError(f"white_balance: clip_level in (0, 1] and white_patch_fraction in (0, 0.5] expected, "
+                             f"got {p.clip_level}, {p.white_patch_fraction}")
+        if (p.source == "spot") != (p.spot is not None):
+            raise StageError("white_balance: spot: expected [top, left, bottom, right] with source: spot (and only then)")
+        if p.spot is not None and not (0 <= p.spot[0] < p.spot[2] and 0 <= p.spot[1] < p.spot[3]):
+            raise StageError(f"white_balance: spot: expected 0 <= top < bottom and 0 <= left < right, got {list(p.spot)}")
+        if p.source in ("none", "grey_world", "white_patch", "spot") and (p.neutral is not None or p.gains is not None):
             raise StageError("white_balance: source: none contradicts the neutral/gains given")
         if p.source == "neutral" and p.gains is not None or p.source == "gains" and p.neutral is not None:
             raise StageError(f"white_balance: source: {p.source} contradicts the other of neutral/gains given")
@@ -104,7 +165,18 @@ class WhiteBalance(Stage):
         if source == "gains":
             g = np.asarray(p.gains, dtype=np.float64)
             return g / g[1]
-        neutral = capture_neutral(frame.meta) if source == "as_shot" else np.asarray(p.neutral, dtype=np.float64)
+        if source in ("grey_world", "white_patch"):
+            neutral = estimate_neutral(frame, source, clip_level=p.clip_level, fraction=p.white_patch_fraction)
+        elif source == "spot":
+            t, l, b, r = p.spot
+            if b > frame.height or r > frame.width:
+                raise StageError(f"{frame.meta.source or 'frame'}: white_balance spot {list(p.spot)} outside the "
+                                 f"{frame.width}x{frame.height} frame")
+            t, l = t - t % 2, l - l % 2  # whole CFA cells
+            neutral = estimate_neutral(frame.evolve(np.asarray(frame.data)[t:b, l:r]), "grey_world",
+                                       clip_level=p.clip_level)
+        else:
+            neutral = capture_neutral(frame.meta) if source == "as_shot" else np.asarray(p.neutral, dtype=np.float64)
         return neutral[1] / neutral
 
     def apply(self, frame: RawFrame, drawn=None) -> RawFrame:

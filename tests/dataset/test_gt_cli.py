@@ -75,3 +75,28 @@ def test_emva_ccd_flat_equals_plain_mean(shared_file):
     assert g.report["alignment"]["max_shift_px"] < 0.5  # no spurious shifts on a flat field
     assert g.report["dropped"] == []
     assert 0 < g.report["defects"]["count"] < 0.01 * x[0].size
+
+
+def test_gt_on_a_sidd_scene_instance_layout(tmp_path):
+    """SIDD's layout: <instance>/<id>_NOISY_RAW_NNN.MAT frames + _GT_RAW_ + _METADATA_RAW_ (from the shared data)."""
+    import scipy.io
+
+    from conftest import shared_path
+    from simcam.cli import main
+
+    meta = shared_path("sidd/0001_METADATA_RAW_010.MAT")
+    root = tmp_path / "SIDD_Small"
+    inst = root / "0001_001_S6_00100_00060_3200_L"
+    inst.mkdir(parents=True)
+    (inst / "0001_METADATA_RAW_010.MAT").write_bytes(meta.read_bytes())
+    rng = np.random.default_rng(0)
+    clean = np.tile(np.linspace(0.1, 0.6, 64, dtype=np.float32), (48, 1))
+    for i in range(6):
+        noisy = np.clip(clean + rng.normal(0, 0.01, clean.shape), 0, 1).astype(np.float32)
+        scipy.io.savemat(inst / f"0001_NOISY_RAW_{i + 1:03d}.MAT", {"x": noisy})
+    scipy.io.savemat(inst / "0001_GT_RAW_001.MAT", {"x": clean})
+    out = tmp_path / "out"
+    assert main(["gt", str(root), "-o", str(out), "--workers", "0", "--alignment", "none"]) == 0
+    gt = np.load(out / f"{inst.name}.npz")["gt"]
+    assert gt.shape == clean.shape
+    assert np.abs(gt - clean).mean() < 0.01 / np.sqrt(6) * 2  # the mean of 6 frames

@@ -7,7 +7,7 @@ from scipy import stats
 from simcam.noise import NoiseCondition, model_from_entry
 from simcam.noise.effects import EFFECT_NAMES, effect_from_entry, effect_types
 
-COND = NoiseCondition(cfa="RGGB")
+COND = NoiseCondition(cfa="RGGB", exposure_s=0.5)
 B2 = 1e-6  # base read variance used below
 
 EXAMPLES = {
@@ -24,6 +24,16 @@ EXAMPLES = {
     "frame_flicker": {"sigma": 0.01},
     "nonlinearity": {"strength": 0.02},
     "channel_gain": {"gain": [1.0, 1.02, 0.98, 1.0]},
+    "dark_current": {"rate": 50.0, "dcnu_log_sigma": 0.3, "electron": 1e-3},
+    "amp_glow": {"rate": 200.0, "origin": "top_right", "scale": 0.2, "electron": 1e-3},
+    "dead_pixels": {"dead_fraction": 0.01, "stuck_fraction": 0.005},
+    "adc_dnl": {"range_dn": 1023.0, "offset_dn": 64.0, "bits": 10, "dnl_sigma": 0.3},
+    "rtn": {"fraction": 0.02, "amplitude": 5e-3, "amplitude_log_sigma": 0.3},
+    "charge_crosstalk": {"coefficient": 0.05},
+    "empirical_offset": {"axis": "column", "quantiles": [-2e-3, -1e-3, 0.0, 1e-3, 3e-3]},
+    "empirical_gain": {"axis": "pixel", "quantiles": [0.97, 0.99, 1.0, 1.01, 1.03]},
+    "empirical_code": {"range_dn": 1023.0, "offset_dn": 64.0, "edges": [float(k) + 0.5 for k in range(1100)]},
+    "empirical_field": {"field": [[1e-3, 2e-3], [3e-3, 4e-3]], "electron": 1e-3},
 }
 
 

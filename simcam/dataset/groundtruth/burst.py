@@ -20,6 +20,13 @@ from ...frame import CameraMeta, RawFrame
 
 RAW_EXTS = (".dng",)
 IMAGE_EXTS = (".png", ".tif", ".tiff", ".pgm")
+#: File stems of clean references written beside burst frames (simcam synth: clean.dng; simcam gt: gt.*).
+REFERENCE_STEMS = ("clean", "gt")
+
+
+def is_sidd_frame(p: Path) -> bool:
+    """A SIDD noisy raw frame: ``*_NOISY_RAW_NNN.MAT``."""
+    return p.is_file() and p.suffix.upper() == ".MAT" and "NOISY_RAW" in p.name.upper()
 
 
 @dataclass
@@ -106,13 +113,17 @@ class Burst:
         their own black/white levels (``black_level``/``white_level`` override).
         Plain images are monochrome DN: ``(DN - black) / (white - black)``;
         ``white_level`` defaults to the sample type's maximum (65535 for 16-bit),
-        ``black_level`` to 0.
+        ``black_level`` to 0. Without ``pattern``, the clean references that ``simcam synth`` and
+        ``simcam gt`` write beside frames (``clean.*``, ``gt.*``) are not frames and are skipped.
         """
         path = Path(path)
         if not path.is_dir():
             raise DatasetError(f"{path}: burst directory not found")
+        if pattern is None and any(is_sidd_frame(p) for p in path.iterdir()):
+            return cls._from_sidd(path, **kw)
         files = sorted(p for p in (path.glob(pattern) if pattern else path.iterdir())
-                       if p.is_file() and p.suffix.lower() in RAW_EXTS + IMAGE_EXTS)
+                       if p.is_file() and p.suffix.lower() in RAW_EXTS + IMAGE_EXTS
+                       and (pattern or p.stem.lower() not in REFERENCE_STEMS))
         if not files:
             raise DatasetError(f"{path}: no frames found; expected .dng or .png/.tif/.pgm files")
         exts = {p.suffix.lower() in RAW_EXTS for p in files}
@@ -142,6 +153,30 @@ class Burst:
         lo = (0.0 - black) / (white - black)
         return cls([(lambda p=p: load(p)) for p in files], [str(p) for p in files], cfa=meta.cfa,
                    clip_low=lo, clip_high=1.0, meta=meta, **kw)
+
+    @classmethod
+    def _from_sidd(cls, path: Path, **kw) -> "Burst":
+        """A SIDD scene instance (Abdelhamed, Lin & Brown, CVPR 2018): ``*_NOISY_RAW_NNN.MAT`` frames
+        (variable ``x``: normalised raw in [0, 1], black subtracted) and the ``*_METADATA_RAW_*.MAT`` tag
+        file (CFA); the ``*_GT_RAW_*`` reference is not a frame."""
+        from ...io.sidd import _load_mat, read_sidd_meta
+
+        files = sorted(p for p in path.iterdir() if is_sidd_frame(p))
+        metas = sorted(p for p in path.iterdir() if "METADATA_RAW" in p.name.upper() and p.suffix.upper() == ".MAT")
+        if not metas:
+            raise DatasetError(f"{path}: SIDD scene without *_METADATA_RAW_*.MAT; expected the tag file beside "
+                               "the NOISY_RAW frames")
+        meta = read_sidd_meta(metas[0])
+
+        def load(p):
+            v = _load_mat(p, DatasetError)
+            x = v.get("x", next((a for a in v.values() if isinstance(a, np.ndarray) and a.ndim == 2), None))
+            if x is None or np.ndim(x) != 2:
+                raise DatasetError(f"{p}: no 2-D image variable 'x'; expected a SIDD NOISY_RAW .MAT")
+            return np.asarray(x, dtype=np.float32)
+
+        return cls([(lambda p=p: load(p)) for p in files], [str(p) for p in files], cfa=meta.cfa,
+                   clip_low=0.0, clip_high=1.0, meta=meta, **kw)
 
     @classmethod
     def _from_images(cls, files, black_level, white_level, **kw) -> "Burst":

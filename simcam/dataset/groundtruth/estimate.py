@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from ...errors import DatasetError
 from .alignment import (ALIGN_MODES, constant_field, dense_field, field_stats, global_shift, local_shifts,
@@ -151,11 +152,11 @@ class GroundTruth:
     report: dict[str, Any] = field(default_factory=dict)
 
     def save_npz(self, path: str | Path) -> Path:
-        """Write ``gt``, ``sigma``, ``defects``, ``valid``, ``n_used`` (compressed npz)."""
-        path = Path(path)
-        np.savez_compressed(path, gt=self.gt, sigma=self.sigma, defects=self.defects, valid=self.valid,
-                            n_used=self.n_used, reference=np.int64(self.reference))
-        return path
+        """Write ``gt``, ``sigma``, ``defects``, ``valid``, ``n_used`` (compressed npz, deterministic bytes)."""
+        from ...io.npz import write_npz
+
+        return write_npz(path, {"gt": self.gt, "sigma": self.sigma, "defects": self.defects, "valid": self.valid,
+                                "n_used": self.n_used, "reference": np.int64(self.reference)})
 
 
 def _bar(progress: bool, total: int, desc: str):
@@ -340,13 +341,16 @@ def _run(burst, cfg, store, shape, cfa, lo, hi, dmap, dmask, timing, t0, progres
         fieldmap = None
         if reference is not None and i != ref_idx:
             if cfg.alignment == "local":
-                lm, sh, rel = local_shifts(reference, x)
-                keep = reject_outliers(reference.grid, sh, rel, cfg.outlier_px)
+                # the matrix DFT and the thin-plate spline are BLAS products whose rounding depends on
+                # the BLAS thread count: one thread, so the field is the same bytes on any machine split
+                with threadpool_limits(limits=1, user_api="blas"):
+                    lm, sh, rel = local_shifts(reference, x)
+                    keep = reject_outliers(reference.grid, sh, rel, cfg.outlier_px)
+                    fieldmap = (dense_field(lm[keep], sh[keep], shape, cfa, smoothing=cfg.tps_smoothing)
+                                if keep.any() else None)
                 info["landmarks_unreliable"] = int((~rel).sum())
                 info["landmarks_rejected"] = int((rel & ~keep).sum())
-                if keep.any():
-                    fieldmap = dense_field(lm[keep], sh[keep], shape, cfa, smoothing=cfg.tps_smoothing)
-                else:  # no structure to register against: leave the frame where it is
+                if fieldmap is None:  # no structure to register against: leave the frame where it is
                     fieldmap = constant_field(np.zeros(2), shape, cfa)
             else:
                 shift, ok = global_shift(reference, x)

@@ -40,7 +40,8 @@ from ..base import BLOCK_ROWS, block_rng, from_registry, site_map, site_values
 
 EFFECT_NAMES = ("row_noise", "column_fpn", "dsnu", "prnu", "hot_pixels", "heavy_tail_read", "quantization",
                 "spatial_correlation", "periodic_pattern", "black_level_offset", "frame_flicker", "nonlinearity",
-                "channel_gain")
+                "channel_gain", "dark_current", "amp_glow", "dead_pixels", "adc_dnl", "rtn", "charge_crosstalk",
+                "empirical_offset", "empirical_gain", "empirical_code", "empirical_field")
 
 _EFFECTS: dict[str, type["Effect"]] = {}
 
@@ -58,6 +59,8 @@ class EffectContext:
     #: read noise of this frame so far (the base model's signal-independent Gaussian part plus
     #: heavy-tailed read noise), when an effect of the composite ``needs_read``; else None.
     read: np.ndarray | None = None
+    #: exposure time of the frame, seconds (exposure-dependent effects: dark_current, amp_glow)
+    exposure_s: float | None = None
 
     def block_rng(self, block: int) -> np.random.Generator:
         if self.key is None:
@@ -115,7 +118,7 @@ def register_effect(cls: type[Effect]) -> type[Effect]:
 
 
 def _load() -> None:
-    from . import correlation, defects, fixed_pattern, response, temporal  # noqa: F401
+    from . import adc, correlation, dark, defects, empirical, fixed_pattern, response, temporal  # noqa: F401
 
 
 def effect_types() -> dict[str, type[Effect]]:

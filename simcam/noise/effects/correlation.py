@@ -24,7 +24,7 @@ either axis) is::
 
 the diagonal one is ``rho(1)^2`` and different-colour neighbours stay
 uncorrelated: the lag-1 / lag-2 statistics of
-``simcam.dataset.diagnostics.lag1_corr`` / ``lag2_corr`` (diluted by the shot
+``simcam.calibration.diagnostics.lag1_corr`` / ``lag2_corr`` (diluted by the shot
 and quantisation noise in the data). Borders reflect about each plane's edge
 pixel. Reference: EMVA 1288 R4.0 sec. 8 (spatial non-white temporal noise).
 """
@@ -79,4 +79,64 @@ class SpatialCorrelation(Effect):
         f = plane_filter(ctx.read, float(self.coefficient))
         x += f - ctx.read  # x = shot + read -> shot + filtered read
         ctx.read[...] = f
+        return x
+
+
+def charge_share(q: np.ndarray, c: float, diagonal: float = 0.0) -> np.ndarray:
+    """Charge-conserving sharing with the 4 adjacent (weight ``c``) and 4 diagonal (``diagonal``) pixels.
+
+    ``out = (1 - 4 c - 4 d) q + c * sum(adjacent q) + d * sum(diagonal q)``; borders reflect.
+    """
+    q = np.asarray(q, dtype=np.float32)
+    p = np.pad(q, [(0, 0)] * (q.ndim - 2) + [(1, 1), (1, 1)], mode="reflect")
+    h, w = q.shape[-2:]
+
+    def sh(dy, dx):
+        return p[..., 1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
+
+    adj = sh(-1, 0) + sh(1, 0) + sh(0, -1) + sh(0, 1)
+    out = np.float32(1.0 - 4.0 * c - 4.0 * diagonal) * q + np.float32(c) * adj
+    if diagonal:
+        out += np.float32(diagonal) * (sh(-1, -1) + sh(-1, 1) + sh(1, -1) + sh(1, 1))
+    return out
+
+
+@register_effect
+class ChargeCrosstalk(Effect):
+    """Photo-electrons shared with neighbouring pixels before read-out (charge-domain crosstalk).
+
+    Electrons generated near a pixel's edge diffuse into its neighbours — of the other colours
+    on a Bayer mosaic (A. Abdelhamed, *Noise Modelling for Smartphone Cameras*, PhD dissertation,
+    York University, 2020, ch. 2, crosstalk). Charge is conserved: the signal *and its shot
+    noise* are filtered by ``(1 - 4c - 4d) delta + c (4 adjacent) + d (4 diagonal)`` before the
+    read noise is added. So a flat field's mean keeps its level (mixed between the colours), its
+    temporal variance drops by ``(1 - 4c - 4d)^2 + 4c^2 + 4d^2`` (the photon-transfer slope
+    looks lower than the true gain) and adjacent pixels' noise becomes correlated; dark frames
+    (no electrons) are untouched. Acts on ``x - read`` (signal + shot noise, and whatever earlier
+    read-out effects added: list it first). Compare ``spatial_correlation``, which couples the
+    read noise of same-colour pixels.
+
+    Parameters
+    ----------
+    coefficient : float
+        Share of a pixel's charge going to each adjacent pixel (0 <= c, 4c + 4d < 1).
+    diagonal : float
+        Share going to each diagonal pixel.
+    """
+
+    type: Literal["charge_crosstalk"] = "charge_crosstalk"
+    coefficient: float = Field(ge=0, lt=0.25)
+    diagonal: float = Field(0.0, ge=0, lt=0.25)
+    needs_read = True
+
+    def apply(self, x, ctx):
+        if self.coefficient == 0 and self.diagonal == 0:
+            return x
+        if 4 * (self.coefficient + self.diagonal) >= 1:
+            from ...errors import NoiseModelError
+
+            raise NoiseModelError(f"charge_crosstalk: 4 (coefficient + diagonal) = "
+                                  f"{4 * (self.coefficient + self.diagonal):g}; expected < 1")
+        charge = x - ctx.read
+        x[...] = charge_share(charge, float(self.coefficient), float(self.diagonal)) + ctx.read
         return x

@@ -70,3 +70,46 @@ class HotPixels(Effect):
         flat[ctx.fixed["stuck"]] = np.float32(self.stuck_value)
         flat[ctx.fixed["dead"]] = np.float32(0.0)
         return x
+
+
+@register_effect
+class DeadPixels(Effect):
+    """Dead and stuck pixels: fixed defects that read black (dead) or a fixed value (stuck) whatever the light.
+
+    Unlike ``hot_pixels`` (an extra dark signal that still responds to light) these pixels
+    carry no image information (A. Abdelhamed, *Noise Modelling for Smartphone Cameras*, PhD
+    dissertation, York University, 2020, ch. 2, defective pixels; EMVA 1288 R4.0 sec. 8.5, defect
+    pixels). The set is drawn once per sensor.
+
+    Parameters
+    ----------
+    dead_fraction : float
+        Share of pixels that read 0 (black).
+    stuck_fraction : float
+        Share of pixels that read ``stuck_value``.
+    stuck_value : float
+        Normalised raw (1.0: white, saturated).
+    """
+
+    type: Literal["dead_pixels"] = "dead_pixels"
+    dead_fraction: float = Field(0.0, ge=0, le=1)
+    stuck_fraction: float = Field(0.0, ge=0, le=1)
+    stuck_value: float = 1.0
+
+    @model_validator(mode="after")
+    def _sum(self):
+        if self.dead_fraction + self.stuck_fraction > 1:
+            raise ValueError("dead_fraction + stuck_fraction must be <= 1")
+        return self
+
+    def fixed(self, shape, rng):
+        u = rng.random(shape)
+        dead = u < self.dead_fraction
+        stuck = (u >= self.dead_fraction) & (u < self.dead_fraction + self.stuck_fraction)
+        return {"dead": np.flatnonzero(dead), "stuck": np.flatnonzero(stuck)}
+
+    def apply(self, x, ctx):
+        flat = x.reshape(-1)
+        flat[ctx.fixed["dead"]] = np.float32(0.0)
+        flat[ctx.fixed["stuck"]] = np.float32(self.stuck_value)
+        return x

@@ -112,3 +112,49 @@ class FrameFlicker(Effect):
     def apply(self, x, ctx):
         x *= np.float32(ctx.frame["gain"])
         return x
+
+
+@register_effect
+class Rtn(Effect):
+    """Random telegraph noise: a fixed set of pixels switching between two levels from frame to frame.
+
+    A charge trap near the source follower captures and releases an electron at random, so
+    the pixel's output jumps between a low and a high level (Janesick, *Photon Transfer*, 2007,
+    ch. 10; in CMOS image sensors the main source of heavy read-noise tails). A share
+    ``fraction`` of the pixels (drawn once per sensor) each have an amplitude
+    ``amplitude * exp(s n_i - s^2 / 2)`` (log-normal with mean ``amplitude``, n_i ~ N(0, 1)); in
+    every frame each sits in its high state with probability ``p_high``, independently.
+
+    Parameters
+    ----------
+    fraction : float
+        Share of RTN pixels.
+    amplitude : float
+        Mean step between the two levels, normalised raw.
+    amplitude_log_sigma : float
+        Log-normal spread of the steps (0: all equal).
+    p_high : float
+        Probability of the high state in a frame.
+    """
+
+    type: Literal["rtn"] = "rtn"
+    fraction: float = Field(ge=0, le=1)
+    amplitude: float = Field(ge=0)
+    amplitude_log_sigma: float = Field(0.0, ge=0)
+    p_high: float = Field(0.5, ge=0, le=1)
+
+    def fixed(self, shape, rng):
+        idx = np.flatnonzero(rng.random(shape) < self.fraction)
+        s = float(self.amplitude_log_sigma)
+        amp = self.amplitude * np.exp(s * rng.standard_normal(idx.size) - s * s / 2) if s > 0 else \
+            np.full(idx.size, self.amplitude)
+        return {"index": idx, "amplitude": amp.astype(np.float32)}
+
+    def apply(self, x, ctx):
+        idx = ctx.fixed["index"]
+        if idx.size == 0:
+            return x
+        high = ctx.block_rng(0).random(idx.size) < self.p_high  # this effect's own stream, one draw per frame
+        flat = x.reshape(-1)
+        flat[idx] += np.where(high, ctx.fixed["amplitude"], np.float32(0.0))
+        return x

@@ -8,6 +8,7 @@ gain layer, four more steps. Tensors are NCHW with channels in
 from __future__ import annotations
 
 import math
+import pickle
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -235,7 +236,11 @@ class NoiseFlow(nn.Module):
         if not path.is_file():
             raise NoiseModelError(f"{path}: checkpoint not found")
         try:
-            ck = torch.load(str(path), map_location=map_location, weights_only=False)
+            ck = torch.load(str(path), map_location=map_location, weights_only=True)
+        except pickle.UnpicklingError:
+            raise NoiseModelError(f"{path}: refused: the checkpoint holds Python objects other than tensors and plain "
+                                  "data (checkpoints are read with torch.load(weights_only=True); a file is data, "
+                                  "never code)") from None
         except Exception as exc:  # noqa: BLE001 - any unreadable file
             raise NoiseModelError(f"{path}: not a readable torch checkpoint ({type(exc).__name__})") from None
         if not isinstance(ck, dict) or ck.get("format") != "simcam-noiseflow/1":

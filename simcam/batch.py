@@ -1,0 +1,256 @@
+"""Batch jobs over many inputs, on ``dask.distributed`` or in this process.
+
+A batch command (``simcam render IN... -o DIR``, ``simcam synth ... -o set.zarr``,
+``simcam gt BURSTS... -o DIR``, ``simcam loop SETS... --out DIR``) turns its inputs into
+:class:`Task` objects and hands them to :func:`run_batch` with a *job*: a module-level function
+``job(payload) -> dict`` that does one item and writes that item's outputs (atomically: the
+writers write then rename). ``run_batch``
+
+* runs the tasks on a ``LocalCluster`` of worker processes (one thread each, numba / BLAS /
+  OpenMP / onnxruntime limited to ``threads_per_worker`` threads so workers do not
+  oversubscribe the cores), on an existing scheduler (``scheduler="tcp://host:8786"`` or the
+  ``DASK_SCHEDULER_ADDRESS`` variable), or serially in this process (``workers=0``);
+* shows a progress bar on the client (on a terminal) and prints the dashboard address;
+* collects per-item failures (one line each) while the other items complete; a failed item
+  leaves none of its outputs behind;
+* with ``resume=True`` skips the items whose outputs all exist.
+
+Determinism is the job's: item *i* draws from ``SeedSequence([seed, i])`` (the commands put the
+seed in the payload), so the bytes written do not depend on the worker count, the scheduler or
+the order in which items finish.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import shutil
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+from .errors import OptionalDependencyError, SimcamError
+
+#: Environment variables that cap the threads of numba, OpenMP, BLAS and onnxruntime in a worker.
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "NUMBA_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS",
+                    "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
+
+
+@dataclass(frozen=True)
+class Task:
+    """One item of a batch.
+
+    Attributes
+    ----------
+    key : str
+        What the item is called in progress and error lines (usually its input path).
+    payload : object
+        The job's argument (picklable).
+    outputs : tuple of str
+        Files or folders the item writes: all present means done (``resume``); on failure the
+        ones that did not exist before are removed.
+    """
+
+    key: str
+    payload: Any
+    outputs: tuple[str, ...] = ()
+
+
+@dataclass
+class Outcome:
+    """What became of one task."""
+
+    key: str
+    ok: bool
+    skipped: bool = False
+    error: str | None = None
+    seconds: float = 0.0
+    info: dict = field(default_factory=dict)
+
+
+@dataclass
+class BatchConfig:
+    """Where and how a batch runs.
+
+    Attributes
+    ----------
+    workers : int or None
+        Worker processes of the local cluster; ``None``: one per core; ``0``: no cluster, the
+        items run one after the other in this process.
+    scheduler : str or None
+        Address of an existing ``dask.distributed`` scheduler (``tcp://host:8786``); default
+        ``$DASK_SCHEDULER_ADDRESS``. Its workers must see the inputs and outputs under the same
+        paths (a shared filesystem) or use fsspec URLs.
+    threads_per_worker : int
+        Threads of each worker, and the cap on numba / BLAS / OpenMP threads inside it.
+    memory_limit : str
+        Per-worker memory limit of the local cluster (dask syntax, ``"auto"`` = RAM / workers).
+    resume : bool
+        Skip items whose outputs all exist.
+    progress : bool
+        A progress bar on stderr (only on a terminal).
+    """
+
+    workers: int | None = None
+    scheduler: str | None = None
+    threads_per_worker: int = 1
+    memory_limit: str = "auto"
+    resume: bool = False
+    progress: bool = True
+
+    def scheduler_address(self) -> str | None:
+        return self.scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS") or None
+
+
+def one_line(exc: BaseException) -> str:
+    """``str(exc)`` on one line; unexpected exception types are named."""
+    msg = " ".join(str(exc).split()) or "(no message)"
+    return msg if isinstance(exc, SimcamError) else f"{type(exc).__name__}: {msg}"
+
+
+def _remove(paths: Sequence[str]) -> None:
+    for p in paths:
+        path = Path(p)
+        if path.is_dir():
+            shutil.rmtree(path, ignore_errors=True)
+        elif path.exists():
+            path.unlink(missing_ok=True)
+
+
+def execute(job: Callable[[Any], dict], task: Task) -> Outcome:
+    """Run one task where it is scheduled; never raises (a failure is an :class:`Outcome`)."""
+    before = {p for p in task.outputs if Path(p).exists()}
+    t0 = time.perf_counter()
+    try:
+        info = dict(job(task.payload) or {})
+    except Exception as exc:  # noqa: BLE001 - every failure becomes one line of the report
+        _remove([p for p in task.outputs if p not in before])
+        return Outcome(task.key, ok=False, error=one_line(exc), seconds=time.perf_counter() - t0)
+    info["peak_rss_mib"] = _peak_rss_mib()
+    return Outcome(task.key, ok=True, seconds=time.perf_counter() - t0, info=info)
+
+
+def _peak_rss_mib() -> float:
+    """Peak resident memory of this process so far (MiB; Linux reports ru_maxrss in KiB)."""
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def _done(task: Task) -> bool:
+    return bool(task.outputs) and all(Path(p).exists() for p in task.outputs)
+
+
+def _worker_env(threads: int) -> dict[str, str]:
+    return {v: str(int(threads)) for v in THREAD_VARIABLES}
+
+
+def _client(config: BatchConfig):
+    try:
+        import dask
+        from distributed import Client, LocalCluster
+    except ImportError as exc:
+        raise OptionalDependencyError(
+            f"dask.distributed is needed for batch jobs: pip install 'simcam[batch]' ({exc})") from None
+    dask.config.set({"distributed.worker.daemon": False, "logging.distributed": "error"})
+    for name in ("distributed", "distributed.scheduler", "distributed.nanny", "distributed.worker"):
+        logging.getLogger(name).setLevel(logging.ERROR)
+    address = config.scheduler_address()
+    if address:
+        try:
+            return Client(address, timeout="20s"), None
+        except (OSError, TimeoutError) as exc:
+            raise SimcamError(f"--scheduler {address}: cannot reach the dask scheduler ({one_line(exc)})") from None
+    workers = config.workers or os.cpu_count() or 1
+    import importlib.util
+
+    dashboard = "127.0.0.1:0" if importlib.util.find_spec("bokeh") else None  # the dashboard needs bokeh
+    cluster = LocalCluster(n_workers=int(workers), threads_per_worker=int(config.threads_per_worker),
+                           processes=True, memory_limit=config.memory_limit, dashboard_address=dashboard,
+                           silence_logs=logging.ERROR, env=_worker_env(config.threads_per_worker),
+                           host="127.0.0.1")
+    return Client(cluster), cluster
+
+
+def run_batch(job: Callable[[Any], dict], tasks: Sequence[Task], config: BatchConfig | None = None, *,
+              label: str = "items", echo: Callable[[str], None] | None = None) -> list[Outcome]:
+    """Run ``job`` on every task; return the outcomes in task order.
+
+    Parameters
+    ----------
+    job : callable
+        A module-level function ``job(payload) -> dict`` (it is pickled to the workers).
+    tasks : sequence of Task
+    config : BatchConfig, optional
+    label : str
+        Noun for the progress bar ("renders", "bursts").
+    echo : callable, optional
+        Where status lines go (the dashboard address); default stderr.
+
+    Returns
+    -------
+    list of Outcome
+        Failed items have ``ok=False`` and a one-line ``error``; skipped ones ``skipped=True``.
+
+    Examples
+    --------
+    >>> from simcam.batch import BatchConfig, Task, run_batch
+    >>> out = run_batch(dict, [Task("a", {"n": 1}), Task("b", 5)], BatchConfig(workers=0, progress=False))
+    >>> [(o.key, o.ok, o.error) for o in out]
+    [('a', True, None), ('b', False, "TypeError: 'int' object is not iterable")]
+    """
+    from tqdm import tqdm
+
+    config = config or BatchConfig()
+    echo = echo or (lambda s: print(s, file=sys.stderr))
+    outcomes: dict[int, Outcome] = {}
+    todo = []
+    for i, t in enumerate(tasks):
+        if config.resume and _done(t):
+            outcomes[i] = Outcome(t.key, ok=True, skipped=True)
+        else:
+            todo.append(i)
+    bar = tqdm(total=len(todo), desc=label, unit="item", disable=None if config.progress else True)
+    try:
+        if not todo:
+            pass
+        elif config.workers == 0 and not config.scheduler_address():
+            for i in todo:
+                outcomes[i] = execute(job, tasks[i])
+                bar.update(1)
+        else:
+            from distributed import as_completed
+
+            client, cluster = _client(config)
+            try:
+                if client.dashboard_link:
+                    echo(f"dask dashboard: {client.dashboard_link}")
+                futures = {client.submit(execute, job, tasks[i], key=f"simcam-{label}-{i}-{os.getpid()}",
+                                         pure=False): i for i in todo}
+                for fut in as_completed(futures):
+                    i = futures[fut]
+                    try:
+                        outcomes[i] = fut.result()
+                    except Exception as exc:  # noqa: BLE001 - a worker died (memory) or could not unpickle
+                        # writers write then rename: a killed worker leaves no partial file
+                        outcomes[i] = Outcome(tasks[i].key, ok=False, error=f"worker failed: {one_line(exc)}")
+                    bar.update(1)
+            finally:
+                client.close()
+                if cluster is not None:
+                    cluster.close()
+    finally:
+        bar.close()
+    return [outcomes[i] for i in range(len(tasks))]
+
+
+def report(outcomes: Sequence[Outcome], *, command: str, echo_err: Callable[[str], None] | None = None) -> int:
+    """Print one line per failed item and return the exit status (0 all done, 1 any failed)."""
+    echo_err = echo_err or (lambda s: print(s, file=sys.stderr))
+    failed = [o for o in outcomes if not o.ok]
+    for o in failed:
+        err = o.error or ""
+        echo_err(f"{command}: failed: {err}" if err.startswith(o.key) else f"{command}: failed: {o.key}: {err}")
+    return 1 if failed else 0

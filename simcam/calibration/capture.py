@@ -1,0 +1,355 @@
+"""Capture sets: sequences of raw frames of a static scene at fixed settings.
+
+Two layouts are read:
+
+* a **directory of sequences**: each sub-directory holds the frames of one
+  sequence (``*.dng``, or ``*.npy`` arrays in DN with a ``sequence.yaml``
+  giving ``iso``, ``exposure_s``, ``cfa``, ``black_level``, ``white_level``).
+  A name starting with ``dark`` means no light, ``flat`` uniform light, any
+  other name a scene. ``clean.dng`` / ``clean.npy`` is the optional clean
+  reference of a scene (DN, black included).
+* the **EMVA 1288 descriptor** (``EMVA1288_Data.txt``: ``n bits width height``,
+  ``b exposure_ns photons`` / ``d exposure_ns`` followed by ``i path`` lines,
+  Windows separators; monochrome PNGs). EMVA 1288 Release 3.0, sec. 6.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DatasetError
+
+#: A flat is refused when more than this fraction of its pixels sit at the white level.
+SATURATION_LIMIT = 0.01
+#: Largest EMVA 1288 descriptor read (bytes); real ones are a few kB.
+MAX_DESCRIPTOR_BYTES = 1 << 20
+
+
+@dataclass
+class Sequence:
+    """Frames of one static scene at fixed settings.
+
+    ``frames`` is (n, H, W) float32 in DN (black included). ``black_dn`` is the
+    *declared* black level per 2x2 CFA site (metadata), or None when unknown.
+    ``clean`` is the clean reference in DN (H, W) or None.
+    """
+
+    name: str
+    kind: str  # "dark" | "flat" | "scene"
+    frames: np.ndarray
+    iso: int
+    exposure_s: float | None
+    cfa: str | None
+    black_dn: np.ndarray | None
+    white_dn: float
+    clean: np.ndarray | None = None
+    photons: float | None = None  # EMVA: mean photons per pixel
+    source: str = ""
+
+    @property
+    def n(self) -> int:
+        return int(self.frames.shape[0])
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return tuple(self.frames.shape[1:])
+
+    def saturated_fraction(self) -> float:
+        return float(np.mean(self.frames >= self.white_dn))
+
+
+@dataclass
+class CaptureSet:
+    """All sequences of a capture set plus notes made while reading it."""
+
+    root: str
+    layout: str  # "directory" | "emva1288"
+    sequences: list[Sequence]
+    notes: list[str] = field(default_factory=list)
+
+    def isos(self) -> list[int]:
+        return sorted({s.iso for s in self.sequences})
+
+    def group(self, iso: int) -> list[Sequence]:
+        return [s for s in self.sequences if s.iso == iso]
+
+
+def sequence_kind(name: str) -> str:
+    low = name.lower()
+    return "dark" if low.startswith("dark") else "flat" if low.startswith("flat") else "scene"
+
+
+def read_capture_set(path: str | Path, *, check_saturation: bool = True) -> CaptureSet:
+    """Read a capture-set directory or an EMVA 1288 descriptor file.
+
+    Raises
+    ------
+    DatasetError
+        Mixed size or CFA within a sequence, a sequence of one frame, a
+        saturated flat, no sequence at all.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise DatasetError(f"{path}: capture set not found; expected a directory of sequences or an EMVA 1288 descriptor")
+    if path.is_file():
+        return read_emva1288(path)
+    descriptors = sorted(path.glob("EMVA1288*.txt"))
+    if descriptors:
+        return read_emva1288(descriptors[0])
+    seqs = []
+    for d in sorted(p for p in path.iterdir() if p.is_dir()):
+        seqs.append(_read_sequence_dir(d))
+    if not seqs:
+        raise DatasetError(f"{path}: no sequence sub-directories; expected dark*/, flat*/ or scene directories of frames")
+    cs = CaptureSet(str(path), "directory", seqs)
+    _check_set(cs, check_saturation)
+    return cs
+
+
+def _frame_files(d: Path) -> list[Path]:
+    files = sorted(p for p in d.iterdir() if p.is_file() and p.suffix.lower() in (".dng", ".npy")
+                   and p.stem.lower() != "clean")
+    return files
+
+
+def _read_sequence_dir(d: Path) -> Sequence:
+    from ..yamlio import load_yaml
+
+    if any(p.name.upper().find("NOISY_RAW") >= 0 and p.suffix.upper() == ".MAT" for p in d.iterdir()):
+        return _read_sidd_dir(d)
+    files = _frame_files(d)
+    if not files:
+        raise DatasetError(f"{d}: no frames; expected *.dng or *.npy files")
+    side = {}
+    if (d / "sequence.yaml").exists():
+        side_path = d / "sequence.yaml"
+        try:
+            side = load_yaml(side_path.read_text(), source=str(side_path), error=DatasetError) or {}
+        except (OSError, UnicodeDecodeError) as exc:
+            raise DatasetError(f"{side_path}: cannot read ({exc})") from None
+        if not isinstance(side, dict):
+            raise DatasetError(f"{side_path}: expected a mapping of iso, exposure_s, cfa, black_level, white_level")
+    frames, metas = [], []
+    for f in files:
+        arr, meta = _read_frame(f, side)
+        if frames and arr.shape != frames[0].shape:
+            raise DatasetError(f"{f}: frame size {arr.shape[1]}x{arr.shape[0]} differs from {files[0].name} "
+                               f"({frames[0].shape[1]}x{frames[0].shape[0]}); expected one size per sequence")
+        if metas and meta["cfa"] != metas[0]["cfa"]:
+            raise DatasetError(f"{f}: cfa {meta['cfa']!r} differs from {files[0].name} ({metas[0]['cfa']!r}); "
+                               "expected one CFA pattern per sequence")
+        for key in ("iso", "exposure_s"):
+            if metas and meta[key] is not None and metas[0][key] is not None and \
+                    not np.isclose(meta[key], metas[0][key], rtol=1e-6):
+                raise DatasetError(f"{f}: {key} {meta[key]} differs from {files[0].name} ({metas[0][key]}); "
+                                   "expected fixed settings within a sequence")
+        frames.append(arr)
+        metas.append(meta)
+    if len(frames) < 2:
+        raise DatasetError(f"{d}: sequence has 1 frame; expected >= 2 frames of the same scene "
+                           "(temporal variance needs frame pairs)")
+    m = metas[0]
+    clean = None
+    for cname in ("clean.npy", "clean.dng"):
+        if (d / cname).exists():
+            clean, _ = _read_frame(d / cname, side)
+            if clean.shape != frames[0].shape:
+                raise DatasetError(f"{d / cname}: clean reference size {clean.shape} differs from the frames "
+                                   f"{frames[0].shape}; expected the same size")
+            break
+    return Sequence(
+        name=d.name, kind=sequence_kind(d.name), frames=np.stack(frames).astype(np.float32),
+        iso=int(round(m["iso"])) if m["iso"] is not None else 0, exposure_s=m["exposure_s"], cfa=m["cfa"],
+        black_dn=m["black"], white_dn=float(m["white"]), clean=clean, source=str(d),
+    )
+
+
+def _read_frame(f: Path, side: dict) -> tuple[np.ndarray, dict]:
+    if f.suffix.lower() == ".npy":
+        try:
+            arr = np.load(f, allow_pickle=False)
+        except Exception as exc:
+            raise DatasetError(f"{f}: cannot read as a numpy array ({exc})") from None
+        if arr.ndim != 2:
+            raise DatasetError(f"{f}: frame shape {arr.shape}; expected a 2-D H x W mosaic in DN")
+        if "white_level" not in side:
+            raise DatasetError(f"{f.parent / 'sequence.yaml'}: white_level missing; expected the ADC white level in DN "
+                               "for .npy frames")
+        black = side.get("black_level")
+        if black is not None:
+            black = np.broadcast_to(np.asarray(black, dtype=np.float64), (2, 2)).copy()
+        cfa = side.get("cfa")
+        if cfa is not None:
+            from ..cfa import check_pattern
+
+            cfa = check_pattern(str(cfa), where=f"{f.parent / 'sequence.yaml'}: cfa")
+        return arr.astype(np.float32), {"cfa": cfa, "black": black, "white": float(side["white_level"]),
+                                        "iso": side.get("iso"), "exposure_s": side.get("exposure_s")}
+    from ..cfa import shift_pattern
+    from ..io.dng import read_dng
+    from ..stages.raw import black_level_map
+
+    fr = read_dng(f)
+    meta = fr.meta
+    data = np.asarray(fr.data, dtype=np.float32)
+    black_map = black_level_map(meta, data.shape)
+    cfa = meta.cfa
+    if meta.active_area:  # analyse the active area only (masked borders are not image pixels)
+        t, l, b, r = meta.active_area
+        data, black_map = data[t:b, l:r], black_map[t:b, l:r]
+        cfa = shift_pattern(cfa, t, l) if cfa else None
+    black = np.array([[float(np.median(black_map[dy::2, dx::2])) for dx in (0, 1)] for dy in (0, 1)])
+    return data, {"cfa": cfa, "black": black, "white": float(meta.white_level),
+                  "iso": meta.iso, "exposure_s": meta.exposure_time_s}
+
+
+def _read_sidd_dir(d: Path) -> Sequence:
+    """A SIDD scene directory: ``*NOISY_RAW_*.MAT`` frames, ``*GT_RAW_*.MAT`` clean reference,
+    ``*METADATA_RAW_*.MAT`` tags (Abdelhamed et al., CVPR 2018). The .MAT images (variable
+    ``x``) are normalised raw in [0, 1]; they are turned back into DN with the metadata's black
+    and white levels."""
+    from ..io.sidd import _load_mat, read_sidd_meta
+    from ..stages.raw import black_level_map
+
+    def find(tag):
+        return sorted(p for p in d.iterdir() if tag in p.name.upper() and p.suffix.upper() == ".MAT")
+
+    metas = find("METADATA_RAW")
+    if not metas:
+        raise DatasetError(f"{d}: SIDD scene without *METADATA_RAW_*.MAT; expected the tag file beside the frames")
+    meta = read_sidd_meta(metas[0])
+
+    def image(path):
+        v = _load_mat(path, DatasetError)
+        x = v.get("x", next((a for a in v.values() if isinstance(a, np.ndarray) and a.ndim == 2), None))
+        if x is None or np.ndim(x) != 2:
+            raise DatasetError(f"{path}: no 2-D image variable 'x'; expected a SIDD RAW .MAT")
+        return np.asarray(x, dtype=np.float64)
+
+    noisy = [image(p) for p in find("NOISY_RAW")]
+    for p, x in zip(find("NOISY_RAW"), noisy):
+        if x.shape != noisy[0].shape:
+            raise DatasetError(f"{p}: size {x.shape} differs from the first noisy frame {noisy[0].shape}; "
+                               "expected one size per sequence")
+    if len(noisy) < 2:
+        raise DatasetError(f"{d}: sequence has 1 frame; expected >= 2 frames of the same scene "
+                           "(temporal variance needs frame pairs)")
+    black_map = black_level_map(meta, noisy[0].shape).astype(np.float64)
+    scale = float(meta.white_level) - black_map
+    frames = np.stack([x * scale + black_map for x in noisy]).astype(np.float32)
+    gts = find("GT_RAW")
+    clean = (image(gts[0]) * scale + black_map) if gts else None
+    black = np.array([[float(np.median(black_map[dy::2, dx::2])) for dx in (0, 1)] for dy in (0, 1)])
+    return Sequence(name=d.name, kind="scene", frames=frames, iso=int(round(meta.iso or 0)),
+                    exposure_s=meta.exposure_time_s, cfa=meta.cfa, black_dn=black, white_dn=float(meta.white_level),
+                    clean=clean, source=str(d))
+
+
+def _check_set(cs: CaptureSet, check_saturation: bool) -> None:
+    for iso in cs.isos():
+        group = cs.group(iso)
+        ref = group[0]
+        for s in group[1:]:
+            if s.shape != ref.shape or s.cfa != ref.cfa:
+                raise DatasetError(f"{s.source}: size {s.shape} / cfa {s.cfa!r} differs from {ref.source} "
+                                   f"({ref.shape} / {ref.cfa!r}) at ISO {iso}; expected one sensor geometry per ISO")
+        if not any(s.kind == "dark" for s in group):
+            cs.notes.append(f"ISO {iso}: no dark sequence; dark diagnostics (DSNU, hot pixels, black level, "
+                            "read-noise tails, code occupancy, spatial correlation) are skipped")
+    if check_saturation:
+        for s in cs.sequences:
+            if s.kind == "flat" and s.saturated_fraction() > SATURATION_LIMIT:
+                raise DatasetError(f"{s.source}: flat is saturated ({100 * s.saturated_fraction():.1f}% of pixels at "
+                                   f"white level {s.white_dn:g} DN); expected <= {100 * SATURATION_LIMIT:g}%: "
+                                   "shorten the exposure or remove the sequence")
+
+
+def read_emva1288(descriptor: str | Path) -> CaptureSet:
+    """Read an EMVA 1288 descriptor (R3.0 format) into dark and flat sequences.
+
+    Each ``b``/``d`` block becomes one sequence (``flat_NNN`` / ``dark_NNN``) in
+    file order; images are monochrome PNGs whose paths use Windows separators.
+    """
+    descriptor = Path(descriptor)
+    bits = width = height = None
+    blocks: list[dict] = []
+    try:
+        if descriptor.stat().st_size > MAX_DESCRIPTOR_BYTES:
+            raise DatasetError(f"{descriptor}: {descriptor.stat().st_size} bytes; expected an EMVA 1288 descriptor "
+                               f"(a text file under {MAX_DESCRIPTOR_BYTES} bytes) or a directory of sequences")
+        text = descriptor.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise DatasetError(f"{descriptor}: not a text file; expected an EMVA 1288 descriptor (EMVA1288_Data.txt) "
+                           "or a directory of sequences (dark*/, flat*/, scenes)") from None
+    except OSError as exc:
+        raise DatasetError(f"{descriptor}: cannot read ({exc.strerror})") from None
+    for lineno, raw in enumerate(text.splitlines(), 1):
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        parts = line.split()
+        tag = parts[0]
+        try:
+            if tag == "n":
+                bits, width, height = int(parts[1]), int(parts[2]), int(parts[3])
+            elif tag == "b":
+                blocks.append({"kind": "flat", "exp_ns": float(parts[1]), "photons": float(parts[2]), "files": []})
+            elif tag == "d":
+                blocks.append({"kind": "dark", "exp_ns": float(parts[1]), "photons": 0.0, "files": []})
+            elif tag == "i":
+                if not blocks:
+                    raise DatasetError(f"{descriptor}:{lineno}: image line before any 'b' or 'd' line")
+                blocks[-1]["files"].append(descriptor.parent / Path(*parts[1].replace("\\", "/").split("/")))
+            elif tag == "v":
+                pass
+            else:
+                raise DatasetError(f"{descriptor}:{lineno}: unknown line tag {tag!r}; expected v, n, b, d or i")
+        except (IndexError, ValueError):
+            raise DatasetError(f"{descriptor}:{lineno}: cannot parse {line!r}; expected "
+                               "'n bits width height', 'b exposure_ns photons', 'd exposure_ns' or 'i path'") from None
+    if bits is None:
+        raise DatasetError(f"{descriptor}: no 'n bits width height' line; expected an EMVA 1288 descriptor")
+    seqs = []
+    counters = {"flat": 0, "dark": 0}
+    for b in blocks:
+        frames = np.stack([_read_png(f, (height, width)) for f in b["files"]]) if b["files"] else None
+        name = f"{b['kind']}_{counters[b['kind']]:03d}"
+        counters[b["kind"]] += 1
+        if frames is None or frames.shape[0] < 2:
+            raise DatasetError(f"{descriptor}: block {name} (exposure {b['exp_ns']:g} ns) has "
+                               f"{0 if frames is None else frames.shape[0]} image(s); expected >= 2")
+        seqs.append(Sequence(name=name, kind=b["kind"], frames=frames, iso=0, exposure_s=b["exp_ns"] * 1e-9,
+                             cfa=None, black_dn=None, white_dn=float(2 ** bits - 1), photons=b["photons"],
+                             source=f"{descriptor}:{name}"))
+    cs = CaptureSet(str(descriptor), "emva1288", seqs,
+                    notes=["EMVA 1288 descriptor: monochrome, no declared black level (black taken from the darks), "
+                           "ISO unknown (reported as 0)"])
+    return cs
+
+
+def _read_png(path: Path, shape: tuple[int, int]) -> np.ndarray:
+    """One monochrome image (PNG / TIFF) through OpenImageIO, stored values unscaled."""
+    import OpenImageIO as oiio
+
+    if not path.exists():
+        raise DatasetError(f"{path}: image listed in the descriptor not found")
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise DatasetError(f"{path}: cannot read image ({oiio.geterror()})")
+    try:
+        spec = inp.spec()
+        arr = inp.read_image(0, 0, 0, 1, spec.format)
+    finally:
+        inp.close()
+    if arr is None:
+        raise DatasetError(f"{path}: cannot decode image pixels")
+    arr = np.asarray(arr)[..., 0] if np.ndim(arr) == 3 else np.asarray(arr)
+    if spec.nchannels != 1:
+        raise DatasetError(f"{path}: {spec.nchannels} channels; expected a monochrome image")
+    if arr.shape != shape:
+        raise DatasetError(f"{path}: image size {arr.shape[1]}x{arr.shape[0]}; expected {shape[1]}x{shape[0]} "
+                           "from the descriptor's 'n' line")
+    return arr.astype(np.float32)

@@ -1,0 +1,62 @@
+"""``adc_dnl``: an analogue-to-digital converter whose codes have unequal widths.
+
+A real ADC's transition levels sit off their ideal places: code *k* spans
+``[k - 1/2 + u_k, k + 1/2 + u_{k+1})`` in DN instead of ``[k - 1/2, k + 1/2)``. The
+differential non-linearity of code *k* is its width minus one LSB, ``DNL_k = u_{k+1} - u_k``;
+the integral non-linearity is ``u_k`` itself (bounded here: the offsets are drawn independently,
+so INL does not wander). Histograms of dark or flat frames then show codes that are too
+frequent (wide) or too rare (narrow) — "missing codes" in the extreme. The transition offsets
+``u_k ~ N(0, dnl_sigma^2)`` LSB are drawn once per sensor (sorted, so codes never overlap).
+Reference: A. Abdelhamed, *Noise Modelling for Smartphone Cameras*, PhD dissertation, York
+University, 2020, ch. 2 (quantisation noise); IEEE Std 1241-2010, sec. 4.1.3 (DNL, INL).
+
+It replaces ``quantization`` (use one or the other): the output is the code, back in
+normalised raw.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from pydantic import Field
+
+from .base import Effect, register_effect
+
+
+@register_effect
+class AdcDnl(Effect):
+    """ADC with unequal code widths (differential non-linearity).
+
+    Parameters
+    ----------
+    range_dn : float
+        white - black in DN (normalised raw 1.0).
+    offset_dn : float
+        The black level in DN (the code of normalised 0).
+    bits : int
+        ADC resolution: codes 0 .. 2^bits - 1.
+    dnl_sigma : float
+        Standard deviation of the transition offsets, LSB (DNL std is sqrt(2) times it).
+    """
+
+    type: Literal["adc_dnl"] = "adc_dnl"
+    stack_ok = True
+    range_dn: float = Field(gt=0)
+    offset_dn: float = 0.0
+    bits: int = Field(12, ge=1, le=20)
+    dnl_sigma: float = Field(0.2, ge=0, le=2.0)
+
+    def fixed(self, shape, rng):
+        n = 2 ** int(self.bits)
+        u = self.dnl_sigma * rng.standard_normal(n - 1)
+        return {"edges": np.sort(np.arange(n - 1) + 0.5 + u)}
+
+    def codes(self, x: np.ndarray, edges: np.ndarray) -> np.ndarray:
+        """ADC codes of normalised raw ``x``."""
+        analog = x.astype(np.float64) * self.range_dn + self.offset_dn
+        return np.searchsorted(edges, analog, side="right")
+
+    def apply(self, x, ctx):
+        code = self.codes(x, ctx.fixed["edges"])
+        return ((code - self.offset_dn) / self.range_dn).astype(np.float32)

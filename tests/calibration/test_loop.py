@@ -1,0 +1,180 @@
+"""The calibration loop on capture sets with undeclared effects (test-owned generator).
+
+Each case runs the whole loop (base fit, 16-replicate bootstrap per evaluation, Holm at
+alpha = 0.01, held-out before/after). The generator's effect sizes are several times the
+detection floor of a 64x64, 12-frame set, so the outcome at the fixed seeds is not a coin
+flip; the full matrix (13 effects alone + 7 pairs) is the slow test below and
+``benchmarks/loop_detection_matrix.py``.
+"""
+
+import json
+
+import numpy as np
+import pytest
+import yaml
+
+from loop_generator import DEFAULT_EFFECTS, SensorSpec, capture_set, write_capture_set
+from loop_matrix import CASES, run_case
+
+
+def test_base_only_adds_nothing():
+    r = run_case(())
+    assert list(r.model.effects) == [] and r.iterations == [] and r.unexplained == []
+    # the base fit recovers the generator's gain and read noise: K SE ~ 1 % (4 flats x 4 planes x 6 frames
+    # of 1024 pixels), read-noise SE ~ 1 % -> 4 % tolerance
+    assert r.base.K == pytest.approx(2.0, rel=0.04)
+    assert r.base.read_dn == pytest.approx(3.0, rel=0.04)
+
+
+@pytest.mark.parametrize("effect", ["row_noise", "column_fpn", "quantization", "black_level_offset", "channel_gain"])
+def test_single_effect_is_named(effect):
+    r = run_case((effect,))
+    assert list(r.model.effects) == [effect]
+    assert r.unexplained == []
+    it = [i for i in r.iterations if i["accepted"]][0]
+    assert abs(it["discrepancy_after"]) < abs(it["discrepancy_before"])
+
+
+def test_fitted_parameters_match_the_hidden_ones():
+    # row_noise sigma 1.5 DN: SE of the row-mean variance estimate over 6 frames x 64 rows x 5 seqs ~ 4 %
+    r = run_case(("row_noise", "dsnu"))
+    assert set(r.model.effects) == {"row_noise", "dsnu"}
+    assert r.model.effects["row_noise"]["sigma_dn"] == pytest.approx(1.5, rel=0.15)
+    # dsnu 2.5 DN estimated from one 64x64 map (robust variance, SE ~ 3 %)
+    assert r.model.effects["dsnu"]["sigma_dn"] == pytest.approx(2.5, rel=0.15)
+
+
+def test_cli_end_to_end_and_heldout_kl_drop(tmp_path):
+    from simcam.cli import main
+
+    spec = SensorSpec(effects={e: DEFAULT_EFFECTS[e] for e in ("quantization", "column_fpn", "dsnu")})
+    cap = write_capture_set(tmp_path / "cap", capture_set(spec))
+    out = tmp_path / "out"
+    assert main(["loop", str(cap), "--out", str(out)]) == 0
+    doc = json.loads((out / "report.json").read_text())
+    g = doc["isos"][0]
+    assert set(g) >= {"iso", "iterations", "effects", "unexplained"}
+    assert g["iso"] == 800 and set(g["effects"]) == {"quantization", "column_fpn", "dsnu"}
+    for it in g["iterations"]:
+        assert set(it) >= {"effect", "parameters", "diagnostic", "discrepancy_before", "discrepancy_after", "heldout"}
+        assert set(it["heldout"]) >= {"kl_before", "kl_after", "nll_before", "nll_after", "kl_excess_before",
+                                      "kl_excess_after", "kl_structured_before", "kl_structured_after",
+                                      "structured_before", "structured_after"}
+        assert set(it["heldout"]["structured_after"]) == {"pixel", "row", "column", "temporal", "block", "frame"}
+    assert set(doc["emva"]) == {"K_dn_per_e", "sigma_dark_e", "dsnu_e", "prnu_percent"}
+    # held-out marginal KL drops by >= 80 % from the base fit
+    assert g["heldout"]["kl_final"] <= 0.2 * g["heldout"]["kl_base"]
+    assert g["heldout"]["kl_structured_final"] <= 0.2 * g["heldout"]["kl_structured_base"]
+    assert g["heldout"]["kl_excess_final"] <= g["heldout"]["kl_excess_base"]
+    prof = yaml.safe_load((out / "profile.yaml").read_text())
+    entry = prof["cameras"][0]["entries"][0]
+    assert entry["iso"] == 800.0 and entry["model"]["type"] == "composite"
+    effects = {e["type"]: e for e in entry["model"]["effects"]}
+    assert effects["quantization"]["step_dn"] == 4.0 and effects["quantization"]["range_dn"] == 959.0
+    assert effects["dsnu"]["sigma"] == pytest.approx(2.5 / 959.0, rel=0.15)
+    own = yaml.safe_load((out / "loop_model.yaml").read_text())
+    assert own["isos"][0]["effects"]["quantization"]["step_dn"] == 4.0
+    html = (out / "report.html").read_text()
+    assert html.count("data:image/png;base64,") == 4
+    # starting from the written model, nothing is left to add
+    out2 = tmp_path / "out2"
+    assert main(["loop", str(cap), "--out", str(out2), "--start-profile", str(out / "loop_model.yaml")]) == 0
+    doc2 = json.loads((out2 / "report.json").read_text())
+    assert [i for i in doc2["isos"][0]["iterations"] if i["accepted"]] == []
+
+
+def test_no_dark_sequence_runs_without_dark_diagnostics(tmp_path):
+    from simcam.calibration.capture import read_capture_set
+    from simcam.calibration.loop import LoopConfig, run_loop
+
+    caps = capture_set(SensorSpec(height=32, width=32), n_frames=8)
+    del caps["dark"]
+    cs = read_capture_set(write_capture_set(tmp_path / "cap", caps))
+    r = run_loop(cs, LoopConfig(replicates=8, heldout_replicates=4))[0]
+    names = {d.name for d in r.final}
+    assert "dsnu_excess" not in names and "dark_tail_mass" not in names
+    assert any("no dark sequence" in n for n in r.notes)
+
+
+def test_deterministic():
+    a, b = run_case(("row_noise",)), run_case(("row_noise",))
+    assert a.iterations == b.iterations
+
+
+def _structured_drop_ok(r) -> bool:
+    # the structured marginal KL (sum of significant floor-corrected family KLs) drops by >= 80 % from the base fit
+    b, f = r.heldout_base["kl_structured"], r.heldout_final["kl_structured"]
+    return b > 0 and f <= 0.2 * b
+
+
+@pytest.mark.parametrize("case", [("row_noise",), ("hot_pixels",), ("frame_flicker",), ("dsnu", "hot_pixels")],
+                         ids=lambda c: "+".join(c))
+def test_structured_heldout_kl_drops(case):
+    """Effects that barely move the one-pixel marginal (row noise, frame flicker, hot pixels) show in the
+    marginals of aggregated noise; adding the named effect removes >= 80 % of that excess."""
+    r = run_case(case)
+    assert set(r.model.effects) == set(case)
+    assert _structured_drop_ok(r), (r.heldout_base["kl_structured"], r.heldout_final["kl_structured"])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [7, 8, 11])
+@pytest.mark.parametrize("case", CASES[1:], ids=lambda c: "+".join(c))
+def test_detection_matrix(case, seed):
+    # three capture seeds (the benchmark runs 7-16: 260/260 named, structured drop >= 80 % in 250/250)
+    r = run_case(case, seed=seed)
+    assert set(r.model.effects) == set(case)
+    assert r.unexplained == []
+    assert _structured_drop_ok(r), (r.heldout_base["kl_structured"], r.heldout_final["kl_structured"])
+
+
+def test_scene_only_set_with_clean_reference(tmp_path):
+    # no dark, no flat: the base gain comes from binned per-pixel variance against the clean level
+    from loop_matrix import in_memory_capture
+    from simcam.calibration.loop import LoopConfig, run_loop
+
+    spec = SensorSpec(height=32, width=32)
+    caps = capture_set(spec, n_frames=8, flat_levels=(), scene=True)
+    del caps["dark"]
+    cs = in_memory_capture(caps)
+    _yy, xx = np.mgrid[0:32, 0:32]
+    site = np.ones((32, 32))
+    for k, (dy, dx) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):
+        site[dy::2, dx::2] = (0.8, 1.0, 1.0, 0.7)[k]
+    cs.sequences[0].clean = (spec.black_dn + (0.1 + 0.5 * xx / 32) * (spec.white_dn - spec.black_dn) * site)
+    r = run_loop(cs, LoopConfig(replicates=8, heldout_replicates=4))[0]
+    # K from 20 intensity bins of ~50 pixels x 4 frames each: SE ~ 5 % -> 20 % tolerance
+    assert r.base.K == pytest.approx(2.0, rel=0.2)
+
+
+def test_effect_outside_the_vocabulary_is_reported_unexplained():
+    # temporal column noise (per frame, per column) is not one of the 13 effects: the loop must
+    # not force it into column_fpn (whose statistic only sees the fixed part) but report it
+    from loop_matrix import in_memory_capture
+    from simcam.calibration.loop import LoopConfig, run_loop
+
+    # (it also inflates the spread of the fixed-column statistic col_fpn_excess beyond the simulated one, so
+    # that one may be reported too, never attributed; and the column spectrum may stay significant)
+    spec = SensorSpec(effects={"column_noise": {"sigma_dn": 1.5}})
+    r = run_loop(in_memory_capture(capture_set(spec)), LoopConfig())[0]
+    assert list(r.model.effects) == []
+    un = {u["diagnostic"]: u for u in r.unexplained}
+    assert un["col_temporal_excess"]["discrepancy"] > 10
+    assert "no effect of the vocabulary" in un["col_temporal_excess"]["reason"]
+    assert set(un) <= {"col_temporal_excess", "col_fpn_excess", "col_spectrum_peak"}
+    if "col_fpn_excess" in un:
+        assert un["col_fpn_excess"]["reason"].startswith("not attributed: col_temporal_excess")
+
+
+def test_checkerboard_frame_offset_outside_the_vocabulary_is_reported_unexplained():
+    # a per-frame offset of opposite sign on the 00/11 and 01/10 sites (seen on the EMVA 1288 CCD
+    # darks): no effect of the vocabulary makes it, so it must be reported, not forced into one.
+    # 0.3 DN per frame against a white-noise expectation of 3 DN / 64 = 0.047 DN: ~40x in variance
+    from loop_matrix import in_memory_capture
+    from simcam.calibration.loop import LoopConfig, run_loop
+
+    spec = SensorSpec(effects={"checker_offset": {"sigma_dn": 0.3}})
+    r = run_loop(in_memory_capture(capture_set(spec)), LoopConfig())[0]
+    assert list(r.model.effects) == []
+    un = {u["diagnostic"]: u for u in r.unexplained}
+    assert set(un) == {"dark_checker_jitter"} and "no effect of the vocabulary" in un["dark_checker_jitter"]["reason"]

@@ -1,0 +1,74 @@
+"""EMVA 1288 numbers on the real CCD set against the reference implementation's results."""
+
+import re
+
+import pytest
+
+from conftest import shared_path
+from simcam.calibration.capture import read_emva1288
+from simcam.calibration.photon_transfer import emva1288_numbers
+
+
+def _reference(path):
+    txt = path.read_text()
+
+    def val(symbol):
+        m = re.search(re.escape(symbol) + r"\s+(\S+)\s*$", txt, re.M)
+        return float(m.group(1))
+
+    return {"K_dn_per_e": val("K"), "sigma_dark_e": val(r"$\sigma_d$"),
+            "dsnu_e": val(r"$DSNU_{1288}$"), "prnu_percent": val(r"$PRNU_{1288}$")}
+
+
+@pytest.fixture(scope="module")
+def emva():
+    desc = shared_path("emva1288_ccd/EMVA1288_Data.txt")
+    ref = _reference(shared_path("emva1288_ccd/emva1288_v1.0.2_results.txt"))
+    return emva1288_numbers(read_emva1288(desc).sequences), ref
+
+
+def test_emva_gain_and_dark_noise_within_3_percent(emva):
+    got, ref = emva
+    assert ref["K_dn_per_e"] == pytest.approx(0.2801, abs=1e-4)  # the file read is the one the issue quotes
+    for key in ("K_dn_per_e", "sigma_dark_e"):
+        assert got[key] == pytest.approx(ref[key], rel=0.03), key
+
+
+def test_emva_dsnu_prnu(emva):
+    got, ref = emva
+    for key in ("dsnu_e", "prnu_percent"):
+        assert got[key] == pytest.approx(ref[key], rel=0.03), key
+
+
+@pytest.mark.slow
+def test_loop_on_emva_set_reports_before_after(tmp_path):
+    from simcam.calibration.report import run_and_write
+    from simcam.calibration.loop import LoopConfig
+
+    desc = shared_path("emva1288_ccd/EMVA1288_Data.txt")
+    doc = run_and_write(desc.parent, tmp_path / "out", cfg=LoopConfig(max_size=64))
+    assert doc["emva"]["K_dn_per_e"] == pytest.approx(0.2801, rel=0.03)
+    g = doc["isos"][0]
+    for it in g["iterations"]:
+        h = it["heldout"]
+        assert h["kl_before"] is not None and h["kl_after"] is not None
+    assert g["heldout"]["kl_final"] <= g["heldout"]["kl_base"]
+    # the CCD's darks carry a per-frame offset alternating between interleaved sites (~20x the
+    # white-noise spread of the site means): outside the vocabulary, reported as such
+    assert "dark_checker_jitter" in {u["diagnostic"] for u in g["unexplained"]}
+
+
+def test_emva_numbers_on_generated_cfa_set_match_the_generator():
+    # K = 2 DN/e-, read 3 DN -> sigma_d = 1.5 e-. Per plane 32x32 px, 12-frame pairs: K SE ~ 2 %,
+    # dark variance SE ~ 1.4 % -> 6 % tolerance; PRNU 2 % from a 32x32 map of a 12-frame flat (SE ~ 3 %).
+    import numpy as np
+
+    from loop_generator import DEFAULT_EFFECTS, SensorSpec, capture_set
+    from loop_matrix import in_memory_capture
+
+    cs = in_memory_capture(capture_set(SensorSpec(effects={"prnu": DEFAULT_EFFECTS["prnu"]})))
+    e = emva1288_numbers(cs.sequences)
+    assert e["K_dn_per_e"] == pytest.approx(2.0, rel=0.06)
+    assert e["sigma_dark_e"] == pytest.approx(1.5, rel=0.06)
+    assert e["prnu_percent"] == pytest.approx(2.0, rel=0.15)
+    assert len(e["planes"]) == 4 and np.isfinite(e["dsnu_e"] or 0.0)

@@ -1,0 +1,85 @@
+"""Empirical components and measured maps: a profile with an .npz beside it reproduces the map."""
+
+import numpy as np
+import pytest
+import yaml
+from scipy import stats
+
+from simcam.errors import NoiseModelError, ProfileError
+from simcam.noise import NoiseCondition, model_from_entry
+from simcam.profiles import load_profile
+
+COND = NoiseCondition(cfa="RGGB", exposure_s=1.0)
+
+
+def comp(effects, seed=0):
+    return model_from_entry({"type": "composite", "base": {"type": "gaussian", "sigma": 1e-9},
+                             "effects": effects, "sensor_seed": seed})
+
+
+def write_profile(root, effects):
+    doc = {"schema_version": 1,
+           "provenance": {"source": "test", "method": "measured", "tool": "test", "created": "", "licence": "none"},
+           "cameras": [{"id": "cam", "cfa": "RGGB", "entries": [{"iso": 100, "model": {
+               "type": "composite", "base": {"type": "gaussian", "sigma": 1e-9}, "effects": effects,
+               "sensor_seed": 1}}]}]}
+    p = root / "profile.yaml"
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(yaml.safe_dump(doc))
+    return p
+
+
+def test_measured_pixel_map_is_reproduced_through_a_profile(tmp_path):
+    rng = np.random.default_rng(0)
+    dsnu = (2e-3 * rng.standard_normal((40, 60))).astype(np.float32)
+    prof = write_profile(tmp_path / "prof", [{"type": "empirical_offset", "axis": "pixel", "map": "maps.npz#dsnu"}])
+    np.savez(prof.parent / "maps.npz", dsnu=dsnu)
+    m = load_profile(prof).model_for(100)
+    x = m.sample(np.zeros((32, 48), np.float32), COND, np.random.default_rng(1))
+    assert np.allclose(x, dsnu[:32, :48], atol=1e-7)  # top-left part of the calibrated sensor
+
+
+def test_map_errors_are_one_line(tmp_path):
+    def sample(prof):
+        return load_profile(prof).model_for(100).sample(np.zeros((8, 8), np.float32), COND, np.random.default_rng(0))
+
+    with pytest.raises(NoiseModelError, match="missing.npz"):
+        sample(write_profile(tmp_path / "a", [{"type": "empirical_offset", "map": "missing.npz#dsnu"}]))
+    np.savez(tmp_path / "small.npz", dsnu=np.zeros((4, 4)))
+    with pytest.raises(NoiseModelError, match="shape"):
+        sample(write_profile(tmp_path / "b", [{"type": "empirical_offset", "map": "../small.npz#dsnu"}]))
+    with pytest.raises(ProfileError, match="quantiles"):
+        sample(write_profile(tmp_path / "c", [{"type": "empirical_offset"}]))
+
+
+def test_temporal_row_offsets_follow_the_measured_distribution():
+    q = np.quantile(np.random.default_rng(5).laplace(0, 1e-3, 20001), np.linspace(0, 1, 201))
+    m = comp([{"type": "empirical_offset", "axis": "row", "temporal": True, "quantiles": q.tolist()}])
+    x = m.sample_frames(np.zeros((500, 8), np.float32), COND, np.random.default_rng(2), 8)
+    rows = x[:, :, 0].ravel()
+    assert stats.ks_2samp(rows, np.random.default_rng(6).laplace(0, 1e-3, 20000)).pvalue > 1e-3
+    assert np.allclose(x, x[:, :, :1])  # one offset per row and frame
+
+
+def test_empirical_gain_multiplies_the_signal():
+    m = comp([{"type": "empirical_gain", "axis": "column", "quantiles": [0.9, 1.1]}])
+    x = m.sample(np.full((16, 400), 0.5, np.float32), COND, np.random.default_rng(0))
+    g = x[0] / 0.5
+    assert np.allclose(x, x[:1]) and g.min() >= 0.9 - 1e-6 and g.max() <= 1.1 + 1e-6
+    assert abs(g.mean() - 1.0) < 5 * (0.2 / np.sqrt(12)) / np.sqrt(400)
+
+
+def test_empirical_code_uses_the_measured_transitions():
+    edges = [0.5, 1.5, 4.5, 5.5, 9.5]  # code 2 spans 1.5..4.5 (3 LSB wide), code 4 5.5..9.5
+    m = comp([{"type": "empirical_code", "range_dn": 10.0, "edges": edges}])
+    x = m.sample((np.array([[1.0, 2.0, 4.0, 6.0, 9.0, 9.9]]) / 10).astype(np.float32), COND, np.random.default_rng(0))
+    assert (x * 10).round().tolist() == [[1, 2, 2, 4, 4, 5]]
+
+
+def test_empirical_field_scales_with_exposure():
+    m = comp([{"type": "empirical_field", "field": [[0.01, 0.01], [0.01, 0.01]], "electron": 1e-4}])
+    for t in (0.5, 2.0):
+        x = m.sample(np.zeros((64, 64), np.float32), NoiseCondition(cfa="RGGB", exposure_s=t),
+                     np.random.default_rng(1))
+        lam = 0.01 * t / 1e-4
+        assert abs(x.mean() / 1e-4 - lam) < 5 * np.sqrt(lam / x.size)

@@ -1,0 +1,150 @@
+"""Batch commands on dask.distributed: the same bytes as the serial path, failures reported per item.
+
+A LocalCluster of 2 worker processes against ``--workers 0`` (the items one after the other in
+this process) and against the single-item command, on small inputs: render, synth (Zarr
+training set), gt. A truncated DNG among the inputs fails alone, with one line, and the other
+items complete.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("distributed")
+pytest.importorskip("zarr")
+
+REPO = Path(__file__).resolve().parent.parent
+CHART = REPO / "examples" / "data" / "chart.dng"
+PROFILE = REPO / "profiles" / "sidd-gp.yaml"
+
+
+def run_cli(*args: str):
+    return subprocess.run([sys.executable, "-m", "simcam", *map(str, args)], capture_output=True, text=True, cwd=REPO)
+
+
+def tree_hashes(root: Path) -> dict[str, str]:
+    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory):
+    """Three clean DNGs (the chart, cropped differently by synth) and one truncated DNG."""
+    d = tmp_path_factory.mktemp("dngs")
+    for i in range(3):
+        r = run_cli("synth", CHART, "-o", d / f"s{i}", "--profile", PROFILE, "--iso", 400, "--seed", i)
+        assert r.returncode == 0, r.stderr
+        shutil.copy(d / f"s{i}" / "frame_000.dng", d / f"img{i}.dng")
+    (d / "broken.dng").write_bytes(CHART.read_bytes()[:3000])
+    return d
+
+
+def test_render_batch_same_bytes_as_serial_and_single(inputs, tmp_path):
+    dngs = sorted(inputs.glob("*.dng"))
+    r2 = run_cli("render", *dngs, "-o", tmp_path / "w2", "--workers", 2, "-p", "linear-srgb", "--format", "exr")
+    r0 = run_cli("render", *dngs, "-o", tmp_path / "w0", "--workers", 0, "-p", "linear-srgb", "--format", "exr")
+    for r in (r2, r0):
+        assert r.returncode == 1  # the broken input
+        lines = [ln for ln in r.stderr.splitlines() if "failed" in ln]
+        assert len(lines) == 1 and "broken.dng" in lines[0] and "Traceback" not in r.stderr
+    h2, h0 = tree_hashes(tmp_path / "w2"), tree_hashes(tmp_path / "w0")
+    assert sorted(h2) == ["img0.exr", "img1.exr", "img2.exr"] and h2 == h0
+    single = tmp_path / "one.exr"
+    assert run_cli("render", inputs / "img1.dng", "-o", single, "-p", "linear-srgb").returncode == 0
+    assert hashlib.sha256(single.read_bytes()).hexdigest() == h2["img1.exr"]
+
+
+def test_render_batch_resume_skips_done(inputs, tmp_path):
+    out = tmp_path / "o"
+    good = [p for p in sorted(inputs.glob("img*.dng"))]
+    assert run_cli("render", *good[:2], "-o", out, "--workers", 0).returncode == 0
+    before = tree_hashes(out)
+    r = run_cli("render", *good, "-o", out, "--workers", 0, "--resume")
+    assert r.returncode == 0 and "2 already there" in r.stdout
+    after = tree_hashes(out)
+    assert {k: after[k] for k in before} == before and len(after) == 3
+
+
+def test_synth_training_set_same_bytes_for_any_worker_count(inputs, tmp_path):
+    torch = pytest.importorskip("torch")
+    from simcam.dataset.zarr_dataset import TrainingSetDataset
+
+    srcs = [inputs / f"s{i}" / "clean.dng" for i in range(3)] + [inputs / "broken.dng"]
+    common = ["--profile", PROFILE, "--isos", "100,800,1600", "--patches-per-source", 4, "--patch-size", 32,
+              "--seed", 7]
+    r2 = run_cli("synth", *srcs, "-o", tmp_path / "w2.zarr", "--workers", 2, *common)
+    r0 = run_cli("synth", *srcs, "-o", tmp_path / "w0.zarr", "--workers", 0, *common)
+    for r in (r2, r0):
+        assert r.returncode == 1 and r.stderr.count("failed:") == 1 and "broken.dng" in r.stderr
+    assert tree_hashes(tmp_path / "w2.zarr") == tree_hashes(tmp_path / "w0.zarr")
+    ds = TrainingSetDataset(f"file://{tmp_path / 'w2.zarr'}")
+    assert len(ds) == 12
+    s = ds[5]
+    assert tuple(s["noisy"].shape) == (4, 16, 16) and s["noisy"].dtype == torch.float32
+    assert s["meta"]["iso"] in (100.0, 800.0, 1600.0)
+    # the noise is the profile's: noisy - clean has the NLF variance of the drawn ISO (loose check)
+    assert float((s["noisy"] - s["clean"]).std()) > 0
+
+
+def test_gt_batch_same_bytes_as_serial_and_single(inputs, tmp_path):
+    bursts = tmp_path / "bursts"
+    for i in range(2):
+        r = run_cli("synth", CHART, "-o", bursts / f"b{i}", "--profile", PROFILE, "--iso", 800, "--frames", 4,
+                    "--seed", 10 + i)
+        assert r.returncode == 0, r.stderr
+    (bursts / "broken").mkdir()
+    shutil.copy(inputs / "broken.dng", bursts / "broken" / "f.dng")
+    common = ["--alignment", "global"]
+    r2 = run_cli("gt", bursts, "-o", tmp_path / "w2", "--workers", 2, *common)
+    r0 = run_cli("gt", bursts, "-o", tmp_path / "w0", "--workers", 0, *common)
+    for r in (r2, r0):
+        assert r.returncode == 1 and r.stderr.count("failed:") == 1 and "broken" in r.stderr
+    h2, h0 = tree_hashes(tmp_path / "w2"), tree_hashes(tmp_path / "w0")
+    assert sorted(h2) == ["b0.json", "b0.npz", "b1.json", "b1.npz"]
+    assert h2["b0.npz"] == h0["b0.npz"] and h2["b1.npz"] == h0["b1.npz"]
+    for name in ("b0.json", "b1.json"):  # the reports differ only in their timings and output paths
+        a, b = (json.loads((tmp_path / w / name).read_text()) for w in ("w2", "w0"))
+        for rep in (a, b):
+            rep.pop("timing_s"), rep.pop("outputs")
+        assert a == b
+    assert run_cli("gt", bursts / "b1", "-o", tmp_path / "one.npz", "--no-progress", *common).returncode == 0
+    a, b = np.load(tmp_path / "one.npz"), np.load(tmp_path / "w2" / "b1.npz")
+    assert all(np.array_equal(a[k], b[k]) for k in a.files)
+    assert hashlib.sha256((tmp_path / "one.npz").read_bytes()).hexdigest() == h2["b1.npz"]
+
+
+def test_batch_without_a_reachable_scheduler_is_one_line(tmp_path):
+    r = run_cli("render", CHART, CHART, "-o", tmp_path / "o", "--scheduler", "tcp://127.0.0.1:9")
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "scheduler" in r.stderr
+
+
+def test_bench_images_x_denoisers_on_two_workers_equals_the_serial_scores(tmp_path):
+    """simcam bench -d none -d nlm --workers 2: per-block scores equal the one-process run's."""
+    import json
+
+    from simcam.io.sidd_blocks import write_blocks
+
+    rng = np.random.default_rng(3)
+    gt = (0.2 + 0.5 * rng.random((3, 2, 1, 1)) + np.zeros((3, 2, 32, 32))).astype(np.float32)
+    noisy = (gt + 0.03 * rng.standard_normal(gt.shape)).astype(np.float32)
+    write_blocks(tmp_path / "noisy.mat", noisy, "ValidationNoisyBlocksRaw", format="v5")
+    write_blocks(tmp_path / "gt.mat", gt, "ValidationGtBlocksRaw", format="v5")
+    common = ["bench", "--noisy", tmp_path / "noisy.mat", "--gt", tmp_path / "gt.mat", "-d", "none", "-d", "nlm"]
+    assert run_cli(*common, "--json", tmp_path / "serial.json").returncode == 0
+    r = run_cli(*common, "--json", tmp_path / "batch.json", "--workers", 2)
+    assert r.returncode == 0, r.stderr
+    a = json.loads((tmp_path / "serial.json").read_text())["results"]
+    b = json.loads((tmp_path / "batch.json").read_text())["results"]
+    for x, y in zip(a, b):
+        assert x["denoiser"] == y["denoiser"] and x["raw"] == y["raw"]
+        strip = [{k: v for k, v in blk.items() if k != "seconds"} for blk in x["per_block"]]
+        assert strip == [{k: v for k, v in blk.items() if k != "seconds"} for blk in y["per_block"]]
