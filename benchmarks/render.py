@@ -5,7 +5,10 @@ zone plate, with shot and read noise) with simcam's DNG writer, then times the
 whole render DNG -> sRGB 8-bit:
 
 * simcam: ``read_dng`` + the built-in ``srgb`` pipeline with ``demosaic.method``
-  ``bilinear`` and ``malvar2004`` + conversion to uint8;
+  ``bilinear`` and ``malvar2004`` to uint8 samples, as ``simcam render`` runs it
+  (:func:`simcam.render_samples.render_samples`: the stages up to demosaic and crop one by
+  one, then the display tail camera -> XYZ -> sRGB -> clip -> OETF -> uint8 ->
+  orientation fused into one parallel pass);
 * rawpy: ``rawpy.imread`` + ``postprocess(demosaic_algorithm=LINEAR | AHD,
   use_camera_wb=True, output_bps=8, no_auto_bright=True, gamma=(2.4, 12.92))``.
 
@@ -13,10 +16,19 @@ Runs are interleaved (each round runs every configuration once) and the median
 of ``--runs`` rounds is reported, with MP/s and the ratio to rawpy AHD measured
 in the same run. A second table breaks the simcam render into its steps.
 
-Threads: numpy runs its element-wise kernels on one thread; LibRaw uses OpenMP
-(``OMP_NUM_THREADS``, default: all cores). Set ``OMP_NUM_THREADS`` (or
-``--omp-threads N``) and ``OPENBLAS_NUM_THREADS`` in the environment to change
-them; both are printed.
+A third table times whole processes, start to exit (interpreter, imports,
+render, file write), as a user waits for them: ``python -m simcam render X.dng
+-o out.tif --depth 16`` against a Python process doing rawpy AHD (16-bit) and
+``tifffile.imwrite`` of the same TIFF, the ``sidd-srgb`` and ``srgb`` renders to
+PNG, and ``python -m simcam --help`` (``--process-runs``, default 5; 0 skips it).
+
+Threads: numpy runs its element-wise kernels on one thread; simcam's demosaic
+strips and the fused display tail run on a thread pool (``SIMCAM_THREADS``, default: all cores; its output
+is the same whatever the count); LibRaw uses OpenMP (``OMP_NUM_THREADS``,
+default: all cores). Set ``OMP_NUM_THREADS`` (or ``--omp-threads N``),
+``SIMCAM_THREADS`` and ``OPENBLAS_NUM_THREADS`` in the environment to change
+them; all are printed, with the CPU model and the load average (the machine may
+be shared: compare ratios measured in the same run).
 
 Usage::
 
@@ -119,20 +131,22 @@ def simcam_pipeline(method: str):
 
 
 def simcam_render(path: Path, pipe, *, steps: dict[str, float] | None = None) -> np.ndarray:
-    """DNG -> uint8 sRGB through simcam; optionally accumulate per-step seconds in ``steps``."""
+    """DNG -> uint8 sRGB as ``simcam render`` does; optionally accumulate per-step seconds in ``steps``."""
     from simcam.io.dng import read_dng
-    from simcam.io.images import to_samples
+    from simcam.render_samples import fusable_tail, render_tail
 
     t = _clock()
     frame = read_dng(path)
     t = _add(steps, "read_dng", t)
+    start = fusable_tail(pipe.stages)
     seen: dict[str, int] = {}
-    for stage in pipe.stages:
+    for stage in pipe.stages[:start]:
         frame = stage(frame)
         n = seen[stage.type] = seen.get(stage.type, 0) + 1
         t = _add(steps, stage.type if n == 1 else f"{stage.type}[{n}]", t)
-    out = to_samples(frame.data, "uint8")
-    _add(steps, "to_uint8", t)
+    tail = pipe.stages[start:]
+    out = render_tail(tail, frame, "uint8").samples
+    _add(steps, "fused tail: " + " + ".join(s.type for s in tail) + " + uint8", t)
     return out
 
 
@@ -161,7 +175,7 @@ def rawpy_render(path: Path, algo: str) -> np.ndarray:
 
 # -- benchmark -------------------------------------------------------------------------------
 def run_benchmark(h: int, w: int, runs: int, *, workdir: str | Path | None = None, save: str | Path | None = None,
-                  dng: str | Path | None = None, out=print) -> dict:
+                  dng: str | Path | None = None, out=print, process_runs: int = 0) -> dict:
     """Time every configuration ``runs`` times (interleaved) and print the tables.
 
     Returns a dict with ``"results"`` (label -> list of wall seconds), ``"cpu"``
@@ -206,6 +220,7 @@ def run_benchmark(h: int, w: int, runs: int, *, workdir: str | Path | None = Non
                     results.setdefault(f"rawpy {a}", []).append(dt)
                     cpu.setdefault(f"rawpy {a}", []).append(dc)
                 images[f"rawpy {a}"] = img
+        proc = time_processes(path, Path(tmp), process_runs) if process_runs > 0 else None
     if save is not None:
         from simcam.io.images import write_image
 
@@ -222,7 +237,65 @@ def run_benchmark(h: int, w: int, runs: int, *, workdir: str | Path | None = Non
         diffs[k] = float(np.mean(np.abs(img[b:-b, b:-b].astype(np.float32) - ref[b:-b, b:-b])))
     h, w = images["simcam malvar2004"].shape[:2]
     print_tables(h, w, runs, results, cpu, steps, diffs, out=out)
-    return {"results": results, "cpu": cpu, "steps": steps, "mean_abs_diff": diffs}
+    if proc is not None:
+        print_process_table(proc, process_runs, out=out)
+    out("")
+    out(f"1-min / 5-min / 15-min load average at the end: {_load()}")
+    return {"results": results, "cpu": cpu, "steps": steps, "mean_abs_diff": diffs, "processes": proc}
+
+
+RAWPY_TIFF_SCRIPT = """
+import sys, rawpy, tifffile
+with rawpy.imread(sys.argv[1]) as raw:
+    rgb = raw.postprocess(demosaic_algorithm=rawpy.DemosaicAlgorithm.AHD, use_camera_wb=True, output_bps=16,
+                          no_auto_bright=True, gamma=(2.4, 12.92), output_color=rawpy.ColorSpace.sRGB)
+tifffile.imwrite(sys.argv[2], rgb, photometric="rgb")
+"""
+
+
+def process_commands(dng: Path, tmp: Path) -> dict[str, list[str]]:
+    """The whole-process commands timed by :func:`time_processes`."""
+    py = sys.executable
+    return {
+        "simcam render -o out.tif --depth 16": [py, "-m", "simcam", "render", str(dng), "-o",
+                                                 str(tmp / "simcam16.tif"), "--depth", "16"],
+        "python: rawpy AHD + tifffile.imwrite (16-bit)": [py, "-c", RAWPY_TIFF_SCRIPT, str(dng),
+                                                           str(tmp / "rawpy16.tif")],
+        "simcam render -p sidd-srgb -o out.png": [py, "-m", "simcam", "render", str(dng), "-o",
+                                                  str(tmp / "sidd.png"), "-p", "sidd-srgb"],
+        "simcam render -o out.png (8-bit)": [py, "-m", "simcam", "render", str(dng), "-o", str(tmp / "srgb8.png")],
+        "simcam --help": [py, "-m", "simcam", "--help"],
+    }
+
+
+def time_processes(dng: Path, tmp: Path, runs: int) -> dict[str, list[float]]:
+    """Wall seconds of each command of :func:`process_commands`, ``runs`` interleaved rounds after a warm-up."""
+    import subprocess
+
+    env = dict(os.environ)
+    repo = str(Path(__file__).resolve().parent.parent)
+    env["PYTHONPATH"] = repo + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    cmds = process_commands(dng, tmp)
+    out: dict[str, list[float]] = {k: [] for k in cmds}
+    for r in range(runs + 1):  # round 0 warms the file cache and numba's on-disk cache
+        for k, cmd in cmds.items():
+            t0 = time.perf_counter()
+            subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+            if r:
+                out[k].append(time.perf_counter() - t0)
+    return out
+
+
+def print_process_table(proc: dict[str, list[float]], runs: int, *, out=print) -> None:
+    base = float(np.median(proc["python: rawpy AHD + tifffile.imwrite (16-bit)"]))
+    out("")
+    out(f"### Whole process, start to exit (imports, render, write), median of {runs} runs")
+    out("")
+    out("| process | median s | min s | ratio to rawpy + tifffile |")
+    out("|---|---:|---:|---:|")
+    for k, v in proc.items():
+        med = float(np.median(v))
+        out(f"| {k} | {med:.3f} | {min(v):.3f} | {med / base:.2f} |")
 
 
 def print_tables(h, w, runs, results, cpu, steps, diffs, *, out=print) -> None:
@@ -260,10 +333,26 @@ def print_tables(h, w, runs, results, cpu, steps, diffs, *, out=print) -> None:
 def _thread_line() -> str:
     omp = os.environ.get("OMP_NUM_THREADS", f"unset (LibRaw OpenMP uses all {os.cpu_count()} cores)")
     blas = os.environ.get("OPENBLAS_NUM_THREADS", "unset")
-    load = f" 1-min load average at the end: {os.getloadavg()[0]:.1f}." if hasattr(os, "getloadavg") else ""
-    return (f"Threads: numpy element-wise kernels single-threaded; OMP_NUM_THREADS={omp}; "
-            f"OPENBLAS_NUM_THREADS={blas}. Machine: {platform.processor() or platform.machine()}, "
-            f"{os.cpu_count()} cores; numpy {np.__version__}, rawpy {_rawpy_version()}.{load}")
+    from simcam.colour.display_kernel import threads
+
+    return (f"Threads: simcam's demosaic strips and fused display tail on {threads()} threads, other steps "
+            f"single-threaded numpy (SIMCAM_THREADS={os.environ.get('SIMCAM_THREADS', 'unset')}); OMP_NUM_THREADS={omp}; "
+            f"OPENBLAS_NUM_THREADS={blas}. Machine: {_cpu_model()}, {os.cpu_count()} cores; numpy {np.__version__}, "
+            f"rawpy {_rawpy_version()}. Load average (1/5/15 min) now: {_load()}.")
+
+
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def _load() -> str:
+    return " / ".join(f"{v:.1f}" for v in os.getloadavg()) if hasattr(os, "getloadavg") else "n/a"
 
 
 def _rawpy_version() -> str:
@@ -290,6 +379,8 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--workdir", default=None, help="folder for the temporary DNG (default: system temp)")
     ap.add_argument("--dng", default=None, help="benchmark this DNG instead of the synthetic one (--size ignored)")
     ap.add_argument("--save", default=None, help="folder to write the four renders as PNG (for a look)")
+    ap.add_argument("--process-runs", type=int, default=None,
+                    help="rounds of whole-process timings (default 5; 0 with --quick; 0 skips them)")
     ap.add_argument("--omp-threads", type=int, default=None,
                     help="set OMP_NUM_THREADS for LibRaw (must happen before rawpy is imported)")
     args = ap.parse_args(argv)
@@ -301,7 +392,8 @@ def main(argv: list[str] | None = None) -> dict:
     runs = args.runs or (3 if args.quick else 5)
     if runs < 1:
         ap.error(f"--runs: expected at least 1, got {runs}")
-    return run_benchmark(h, w, runs, workdir=args.workdir, save=args.save, dng=args.dng)
+    process_runs = args.process_runs if args.process_runs is not None else (0 if args.quick else 5)
+    return run_benchmark(h, w, runs, workdir=args.workdir, save=args.save, dng=args.dng, process_runs=process_runs)
 
 
 if __name__ == "__main__":

@@ -14,8 +14,9 @@ from typing import Any, Callable
 
 def render_file(input: str | Path, output: str | Path, *, pipeline: Any = "srgb", depth: str | None = None,
                 seed: int = 0, index: int = 0, progress: Callable[[str], None] | None = None,
-                attributes: dict | None = None) -> dict:
-    """Render one DNG to one image file.
+                attributes: dict | None = None, frame: Any = None, quality: int = 95,
+                compression: str | None = None, thumbnail: str | Path | None = None) -> dict:
+    """Render one DNG to one image file (colour-tagged, with the camera's EXIF).
 
     Parameters
     ----------
@@ -29,6 +30,10 @@ def render_file(input: str | Path, output: str | Path, *, pipeline: Any = "srgb"
         Random stages of item ``index`` draw from ``SeedSequence([seed, 0, index])``.
     progress : callable, optional
         Called with each stage's type after it ran.
+    frame : RawFrame, optional
+        ``input`` already read (it is not read again).
+    quality, compression, thumbnail
+        Passed to :func:`simcam.io.images.write_image`.
 
     Returns
     -------
@@ -36,21 +41,27 @@ def render_file(input: str | Path, output: str | Path, *, pipeline: Any = "srgb"
         ``{"output", "width", "height", "kind"}``.
     """
     from .io.dng import read_dng
-    from .io.images import write_image
+    from .io.images import resolve_depth, write_image
     from .pipeline import Pipeline
+    from .render_samples import render_samples
 
     pipe = pipeline if isinstance(pipeline, Pipeline) else (
         Pipeline.from_dict(pipeline, source="<batch>") if isinstance(pipeline, dict) else Pipeline.from_yaml(pipeline))
-    out = pipe(read_dng(input), seed=seed, index=index, progress=progress)
-    kw = {"attributes": attributes} if attributes else {}
-    write_image(output, out.data, depth=depth, protect=(input,), **kw)
-    return {"output": str(output), "width": out.width, "height": out.height, "kind": out.kind}
+    dtype = resolve_depth(output, depth)
+    out = render_samples(pipe, read_dng(input) if frame is None else frame, dtype, seed=seed, index=index,
+                         progress=progress)
+    write_image(output, out, depth=dtype, protect=(input,), attributes=attributes, quality=quality,
+                compression=compression, thumbnail=thumbnail)
+    h, w = out.samples.shape[:2]
+    return {"output": str(output), "width": w, "height": h, "kind": out.kind}
 
 
 def render_job(payload: dict) -> dict:
-    """Batch form of :func:`render_file` (keys: input, output, pipeline, depth, seed, index)."""
+    """Batch form of :func:`render_file` (keys: input, output, pipeline, depth, seed, index; optional
+    quality, compression)."""
     return render_file(payload["input"], payload["output"], pipeline=payload["pipeline"],
-                       depth=payload.get("depth"), seed=payload.get("seed", 0), index=payload.get("index", 0))
+                       depth=payload.get("depth"), seed=payload.get("seed", 0), index=payload.get("index", 0),
+                       quality=payload.get("quality", 95), compression=payload.get("compression"))
 
 
 def synth_patches_job(payload: dict) -> dict:

@@ -16,12 +16,12 @@ PACKAGE = Path(__file__).resolve().parents[1] / "simcam"
 
 # Lowest first. A module may import modules of its own layer or of lower ones (never a cycle).
 LAYERS: list[tuple[str, ...]] = [
-    ("errors", "yamlio"),
+    ("errors", "yamlio", "parallel"),
     ("cfa",),
     ("frame", "raw"),
     ("io", "colour", "demosaic", "noise"),
     ("stages", "profiles"),
-    ("pipeline",),
+    ("pipeline", "render_samples"),
     ("synth", "groundtruth", "denoise", "training", "calibration", "torch", "trainingset", "batch"),
     ("jobs", "api"),  # the per-item work of the commands; the one-call Python entry points
     ("commands", "cli", "__main__", "__init__"),  # simcam/__init__ re-exports errors, frame and api

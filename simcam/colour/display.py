@@ -112,13 +112,19 @@ def _hable(x):
     return (x * (a * x + c * b) + d * e) / (x * (a * x + b) + d * f) - e / f
 
 
-def tone_filmic(x: np.ndarray, exposure: float = 0.0) -> np.ndarray:
-    """Hable (2010) "Uncharted 2" filmic curve on scene-linear values, per channel.
+def tone_filmic(x: np.ndarray, exposure: float = 0.0, white: float = 1.0) -> np.ndarray:
+    """Hable (2010) "Uncharted 2" filmic curve on scene-linear values, per channel, reaching white.
 
-    ``y = H(2^exposure * bias * x) / H(W)`` with ``H(x) = (x(Ax + CB) + DE) / (x(Ax + B) + DF) - E/F``
-    and the constants of :data:`HABLE`. ``exposure`` in stops (EV). Negative input is
-    clipped to 0; the output is display-linear in [0, 1) (encode it with a gamma stage).
+    ``y = H(k x) / H(k white)`` with ``k = 2^exposure * bias``,
+    ``H(x) = (x(Ax + CB) + DE) / (x(Ax + B) + DF) - E/F`` and the constants of
+    :data:`HABLE`: Hable's linear white point ``W`` is put at the scene value
+    ``white`` after exposure (default 1, the white at sensor clipping of a
+    normalised capture), so ``white`` maps to display white 1 whatever the
+    exposure. ``exposure`` in stops (EV). Negative input is clipped to 0; the
+    output is display-linear, in [0, 1] for ``x <= white`` (encode it with a gamma stage).
     """
+    if not (np.isfinite(white) and white > 0):
+        raise ValueError(f"tone_filmic: white: expected a finite value > 0, got {white}")
     x = np.maximum(np.asarray(x, dtype=np.float32), 0.0)
     k = np.float32(2.0 ** float(exposure) * HABLE["bias"])
-    return (_hable(k * x) / np.float32(_hable(np.float32(HABLE["W"])))).astype(np.float32)
+    return (_hable(k * x) / np.float32(_hable(k * np.float32(white)))).astype(np.float32)

@@ -42,6 +42,12 @@ def render(
                                             help="Batch: dask scheduler address (default $DASK_SCHEDULER_ADDRESS, "
                                                  "else a local cluster)."),
     resume: bool = typer.Option(False, "--resume", help="Batch: skip inputs whose output exists."),
+    quality: int = typer.Option(95, "--quality", help="JPEG quality 1..100."),
+    compression: Optional[str] = typer.Option(
+        None, "--compression",
+        help="TIFF: none (default), zip[:N], lzw; PNG: zip:N (zlib level, default 1); EXR: none (default), zips, piz, ..."),
+    thumbnail: Optional[Path] = typer.Option(None, "--thumbnail",
+                                             help="Also write a small 8-bit preview (.jpg or .png); one input only."),
 ) -> None:
     """Render raw DNGs through a pipeline to PNG / TIFF / EXR / JPEG (one file, or a batch on dask)."""
     from ..io.inputs import is_pattern
@@ -53,16 +59,22 @@ def render(
     batch = (len(inputs) > 1 or any(is_pattern(i) or Path(i).is_dir() for i in inputs)
              or output.is_dir() or not output.suffix)
     if not batch:
-        from ..io.images import resolve_depth
+        from ..io.images import resolve_compression, resolve_depth
 
         check_output_file(output, option="-o", inputs=inputs)
         resolve_depth(output, depth)  # fail on a bad format before any work
+        resolve_compression(output, compression)
     pipe = Pipeline.from_yaml(pipeline)
     if overrides:
         pipe = pipe.with_overrides(overrides)
     if batch:
+        if thumbnail is not None:
+            from ..errors import SimcamError
+
+            raise SimcamError(f"--thumbnail {thumbnail}: expected one input and one output file, not a batch")
         raise typer.Exit(_render_batch(inputs, output, pipe, depth=depth, seed=seed, fmt=fmt, workers=workers,
-                                       scheduler=scheduler, resume=resume))
+                                       scheduler=scheduler, resume=resume,
+                                       write={"quality": quality, "compression": compression}))
     from tqdm import tqdm
 
     from ..io.dng import read_dng
@@ -71,15 +83,17 @@ def render(
     # a bar for large frames on a terminal only (disable=None: silent when stderr is not a TTY)
     with tqdm(total=len(pipe.stages), desc=f"render {inputs[0].name}", unit="stage", leave=False,
               disable=None if frame.width * frame.height >= 4_000_000 else True) as bar:
-        info = render_file(inputs[0], output, pipeline=pipe, depth=depth, seed=seed,
-                           progress=lambda name: (bar.set_postfix_str(name), bar.update(1)))
+        info = render_file(inputs[0], output, pipeline=pipe, depth=depth, seed=seed, frame=frame,
+                           progress=lambda name: (bar.set_postfix_str(name), bar.update(1)),
+                           quality=quality, compression=compression, thumbnail=thumbnail)
     typer.echo(f"wrote {output} ({info['width']}x{info['height']}, {info['kind']}, pipeline {pipe.name or pipe.source})")
 
 
-def _render_batch(inputs, out_dir: Path, pipe, *, depth, seed, fmt, workers, scheduler, resume) -> int:
+def _render_batch(inputs, out_dir: Path, pipe, *, depth, seed, fmt, workers, scheduler, resume,
+                  write: dict | None = None) -> int:
     from ..batch import BatchConfig, Task, report, run_batch
     from ..errors import SimcamError
-    from ..io.images import resolve_depth
+    from ..io.images import resolve_compression, resolve_depth
     from ..io.inputs import expand_inputs
     from ..io.outputs import check_output_dir
     from ..jobs import render_job
@@ -88,6 +102,7 @@ def _render_batch(inputs, out_dir: Path, pipe, *, depth, seed, fmt, workers, sch
     check_output_dir(out_dir, option="-o", inputs=files)
     ext = "." + fmt.lower().lstrip(".")
     resolve_depth(out_dir / f"x{ext}", depth)  # fail on a bad format before any work
+    resolve_compression(out_dir / f"x{ext}", (write or {}).get("compression"))
     stems: dict[str, Path] = {}
     for f in files:
         if f.stem in stems:
@@ -96,7 +111,7 @@ def _render_batch(inputs, out_dir: Path, pipe, *, depth, seed, fmt, workers, sch
     out_dir.mkdir(parents=True, exist_ok=True)
     doc = pipe.to_dict()
     tasks = [Task(str(f), {"input": str(f), "output": str(out_dir / f"{f.stem}{ext}"), "pipeline": doc,
-                           "depth": depth, "seed": seed, "index": i}, outputs=(str(out_dir / f"{f.stem}{ext}"),))
+                           "depth": depth, "seed": seed, "index": i, **(write or {})}, outputs=(str(out_dir / f"{f.stem}{ext}"),))
              for i, f in enumerate(files)]
     outcomes = run_batch(render_job, tasks, BatchConfig(workers=workers, scheduler=scheduler, resume=resume),
                          label="render")

@@ -11,8 +11,11 @@ mirror, which keeps the Bayer phase (see :mod:`simcam.demosaic._planes`).
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
+from ..parallel import run_bands
 from ._planes import PhaseView, crop_output, site_layout, strip_setup
 
 
@@ -38,9 +41,13 @@ def demosaic_bilinear(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
     border (and everywhere on a phase-preserving mirror-padded mosaic).
     """
     m, cfa, planes, h2, w2, rgb, rows = strip_setup(mosaic, cfa, "bilinear")
-    buf = np.empty((rows, w2), dtype=np.float32)
-    for s0 in range(0, h2, rows):
-        s1 = min(s0 + rows, h2)
+    h, w = m.shape
+    local = threading.local()
+
+    def strip(s0: int, s1: int) -> bool:  # strips are independent: run on threads, same bytes
+        buf = getattr(local, "buf", None)
+        if buf is None:
+            buf = local.buf = np.empty((rows, w2), dtype=np.float32)
         t = buf[: s1 - s0]
         for (p, q), (site, horiz) in site_layout(cfa).items():
             nb = PhaseView(planes, p, q, s0, s1, w2)
@@ -60,4 +67,7 @@ def demosaic_bilinear(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
                 t += nb(1, -1)
                 t += nb(1, 1)
                 np.multiply(t, 0.25, out=out[..., 2 - site])
-    return crop_output(rgb, *m.shape)
+        return False
+
+    run_bands(h2, strip, rows=rows)
+    return crop_output(rgb, h, w)

@@ -14,8 +14,11 @@ keeps the Bayer phase (see :mod:`simcam.demosaic._planes`).
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
+from ..parallel import run_bands
 from ._planes import PhaseView, crop_output, site_layout, strip_setup
 
 
@@ -43,10 +46,14 @@ def demosaic_malvar2004(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
     border (and everywhere on a phase-preserving mirror-padded mosaic).
     """
     m, cfa, planes, h2, w2, rgb, rows = strip_setup(mosaic, cfa, "malvar2004")
+    h, w = m.shape
     layout = site_layout(cfa)
-    bufs = [np.empty((rows, w2), dtype=np.float32) for _ in range(5)]
-    for s0 in range(0, h2, rows):
-        s1 = min(s0 + rows, h2)
+    local = threading.local()
+
+    def strip(s0: int, s1: int) -> bool:  # strips are independent: run on threads, same bytes
+        bufs = getattr(local, "bufs", None)
+        if bufs is None:
+            bufs = local.bufs = [np.empty((rows, w2), dtype=np.float32) for _ in range(5)]
         t = [b[: s1 - s0] for b in bufs]
         for (p, q), (site, horiz) in layout.items():
             nb = PhaseView(planes, p, q, s0, s1, w2)
@@ -57,7 +64,10 @@ def demosaic_malvar2004(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
                 _green_site(nb, c, out, horiz, 2 - horiz, *t)
             else:
                 _red_blue_site(nb, c, out, 2 - site, *t)
-    return crop_output(rgb, *m.shape)
+        return False
+
+    run_bands(h2, strip, rows=rows)
+    return crop_output(rgb, h, w)
 
 
 def _red_blue_site(nb, c, out, other, t1, t2, t3, t4, t5):

@@ -81,13 +81,18 @@ class Orientation(Stage):
         if v is not None and not 1 <= v <= 8:
             raise StageError(f"orientation: value: expected an EXIF orientation 1..8, got {v}")
 
-    def apply(self, frame: RawFrame, drawn=None) -> RawFrame:
-        v = self.params.value if self.params.value is not None else frame.meta.orientation
+    def transform_value(self, meta) -> int:
+        """The EXIF orientation (1..8) this stage applies to a frame with metadata ``meta``."""
+        v = self.params.value if self.params.value is not None else meta.orientation
         if v is None or not 1 <= int(v) <= 8:
-            raise MetadataError(f"{frame.meta.source or 'frame'}: Orientation: expected 1..8, got {v!r}")
+            raise MetadataError(f"{meta.source or 'frame'}: Orientation: expected 1..8, got {v!r}")
         v = int(v)
         if self.params.convention == "sidd":
             v = _SIDD_SWAP.get(v, v)
+        return v
+
+    def apply(self, frame: RawFrame, drawn=None) -> RawFrame:
+        v = self.transform_value(frame.meta)
         meta = frame.meta.copy()
         meta.orientation = 1
         return frame.evolve(orient(frame.data, v), meta=meta, step=self.type)

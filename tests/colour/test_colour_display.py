@@ -71,19 +71,39 @@ def test_tone_sidd_is_smoothstep():
 
 
 def test_tone_filmic_is_hable():
-    # Hable (2010), "Filmic Tonemapping Operators": Uncharted2Tonemap with ExposureBias 2, W = 11.2
+    # Hable (2010), "Filmic Tonemapping Operators": Uncharted2Tonemap with ExposureBias 2, its
+    # white point W put at the scene white (1 by default) after exposure
     def u2(x):
         a, b, c, d, e, f = 0.15, 0.50, 0.10, 0.20, 0.02, 0.30
         return ((x * (a * x + c * b) + d * e) / (x * (a * x + b) + d * f)) - e / f
 
     x = np.linspace(0, 8, 200)
     for ev in (0.0, 1.0, -1.5):
-        ref = u2(2.0 * 2 ** ev * x) / u2(11.2)
-        out = Tone(curve="filmic", exposure=ev)(_frame(np.tile(x[:, None, None], (1, 1, 3)), "linear_srgb"))
-        np.testing.assert_allclose(out.data[:, 0, 0], ref, atol=1e-5)
-    y = disp.tone_filmic(np.array([0.0, 5.6, 1e6]))
-    assert y[0] == pytest.approx(0.0, abs=1e-6) and y[1] == pytest.approx(1.0, abs=1e-6) and y[2] > 1.0
-    assert np.all(np.diff(disp.tone_filmic(x)) > 0)
+        for white in (1.0, 5.6):
+            k = 2.0 * 2 ** ev
+            ref = u2(k * x) / u2(k * white)
+            out = Tone(curve="filmic", exposure=ev, white=white)(
+                _frame(np.tile(x[:, None, None], (1, 1, 3)), "linear_srgb"))
+            np.testing.assert_allclose(out.data[:, 0, 0], ref, atol=1e-5)
+    # Hable's published normalisation: W = 11.2 at bias 2 is scene value 5.6
+    np.testing.assert_allclose(disp.tone_filmic(x, 0.0, 5.6), u2(2.0 * x) / u2(11.2), atol=1e-5)
+
+
+def test_tone_filmic_reaches_white():
+    for ev in (-2.0, 0.0, 1.5):
+        y = disp.tone_filmic(np.array([0.0, 1.0, 1e6]), ev)
+        assert y[0] == pytest.approx(0.0, abs=1e-6) and y[1] == pytest.approx(1.0, abs=1e-6) and y[2] > 1.0
+    assert np.all(np.diff(disp.tone_filmic(np.linspace(0, 8, 200))) > 0)
+
+
+@pytest.mark.parametrize("curve", ["none", "sidd"])
+def test_tone_exposure_acts_for_every_curve(curve):
+    x = np.linspace(0.0, 0.6, 61)
+    f = _frame(np.tile(x[:, None, None], (1, 1, 3)), "linear_srgb" if curve == "none" else "display")
+    out = Tone(curve=curve, exposure=1.0)(f).data[:, 0, 0]
+    g = 2.0 * x
+    ref = g if curve == "none" else 3 * np.clip(g, 0, 1) ** 2 - 2 * np.clip(g, 0, 1) ** 3
+    np.testing.assert_allclose(out, ref, atol=1e-6)
 
 
 def test_tone_none_is_identity():

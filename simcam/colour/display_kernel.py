@@ -1,0 +1,176 @@
+"""Fused display tail: ``3x3 matrix -> clip -> transfer curve -> output samples`` in one pass over the image.
+
+The stage-by-stage render makes five full-image passes after demosaicking
+(camera -> XYZ, XYZ -> sRGB, clip, sRGB OETF, quantisation), each reading and
+writing 144 MB at 12 MP. :func:`encode_display` works on bands of
+:data:`BAND_ROWS` rows that stay in cache, on a thread pool (numpy releases the
+GIL in its loops), with no just-in-time compiler to load (a command-line render
+pays no start-up for it). Every pixel is computed independently with the same
+float32 operations, so the output is byte-identical whatever the thread count:
+
+1. ``v = (M[c, 0] r + M[c, 1] g) + M[c, 2] b`` in float32 (``M`` the product of the
+   stages' matrices);
+2. ``v = clip(v, lo, hi)`` (the clips; composed with [0, 1] for integer output);
+3. the transfer curve: ``srgb`` (IEC 61966-2-1 OETF: ``12.92 v`` for
+   ``v <= 0.0031308``, else ``1.055 v^(1/2.4) - 0.055``) or ``linear`` (none);
+4. the output: ``uint8``/``uint16`` samples ``round(clip(y, 0, 1) (2^b - 1))``,
+   or float32 / half values.
+
+Integer outputs of the ``srgb`` curve read a table of codes indexed by the
+linear value quantised to ``2^16`` (8-bit) or ``2^20`` (16-bit) steps on
+[0, 1]: the table's code is exact at its grid points and a value is at most half
+a step away, so it differs from quantising the exact curve by at most one code
+(near black, where the curve is steepest, 12.92 x 65535 / 2^21 = 0.4 code; far
+less elsewhere). Float outputs use the exact curve (:func:`simcam.colour.display.srgb_oetf`).
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from ..parallel import run_bands, threads  # noqa: F401  (threads: re-exported for the benchmark)
+
+#: rows per band (a band of a 4000-wide image is 0.8 MB of float32 input)
+BAND_ROWS = 16
+
+_SRGB_T = 0.0031308
+
+
+def srgb_oetf64(x: np.ndarray) -> np.ndarray:
+    """The IEC 61966-2-1 OETF in float64 (the tables' source)."""
+    x = np.asarray(x, dtype=np.float64)
+    return np.where(x <= _SRGB_T, 12.92 * x, 1.055 * np.power(np.maximum(x, _SRGB_T), 1.0 / 2.4) - 0.055)
+
+
+def table_steps(depth: str) -> int:
+    """Linear-value steps on [0, 1] of the code table for ``depth`` (2^16 for uint8, 2^20 for uint16)."""
+    return 1 << 16 if depth == "uint8" else 1 << 20
+
+
+@lru_cache(maxsize=4)
+def code_table(depth: str) -> np.ndarray:
+    """sRGB codes of the linear values ``i / table_steps(depth)``, ``i = 0 .. steps`` (of type ``depth``)."""
+    n = table_steps(depth)
+    top = 255 if depth == "uint8" else 65535
+    x = np.arange(n + 1, dtype=np.float64) / n
+    t = np.round(np.clip(srgb_oetf64(x), 0.0, 1.0) * top).astype(depth)
+    t.flags.writeable = False
+    return t
+
+
+def encode_display(rgb: np.ndarray, matrix: np.ndarray, *, lo: float | None = None, hi: float | None = None,
+                   curve: str = "srgb", depth: str = "uint8") -> np.ndarray:
+    """``depth`` samples of ``curve(clip(M rgb, lo, hi))`` for an H x W x 3 float32 image.
+
+    Parameters
+    ----------
+    rgb : ndarray
+        H x W x 3 float32 (linear).
+    matrix : ndarray
+        3 x 3 applied per pixel (``out[..., i] = sum_j M[i, j] rgb[..., j]``, float32 arithmetic).
+    lo, hi : float or None
+        Clip bounds applied after the matrix (None: no bound).
+    curve : {"srgb", "linear"}
+        Transfer curve after the clip.
+    depth : {"uint8", "uint16", "float32", "half"}
+        Output sample type; integer types take [0, 1] to full scale, clipped.
+
+    Returns
+    -------
+    ndarray
+        H x W x 3 of ``depth``.
+
+    Raises
+    ------
+    ValueError
+        If the matrix product has a NaN or infinite value.
+    """
+    from .display import srgb_oetf
+
+    if curve not in ("srgb", "linear"):
+        raise ValueError(f"encode_display: curve: expected 'srgb' or 'linear', got {curve!r}")
+    if depth not in ("uint8", "uint16", "float32", "half"):
+        raise ValueError(f"encode_display: depth: expected uint8, uint16, float32 or half, got {depth!r}")
+    rgb = np.asarray(rgb, dtype=np.float32)
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise ValueError(f"encode_display: expected an H x W x 3 image, got shape {rgb.shape}")
+    m = np.asarray(matrix, dtype=np.float64).astype(np.float32)
+    lo = -np.inf if lo is None else float(lo)
+    hi = np.inf if hi is None else float(hi)
+    integer = depth in ("uint8", "uint16")
+    if integer:  # clip(clip(v, lo, hi), 0, 1) == clip(v, clip(lo, 0, 1), clip(hi, 0, 1))
+        lo, hi = float(np.clip(lo, 0.0, 1.0)), float(np.clip(hi, 0.0, 1.0))
+    flo, fhi = np.float32(lo), np.float32(hi)
+    h, w = rgb.shape[:2]
+    out = np.empty((h, w, 3), depth if depth != "half" else np.float16)
+    if integer and curve == "srgb":
+        table, scale = code_table(depth), np.float32(table_steps(depth))
+    else:
+        table, scale = None, np.float32(255 if depth == "uint8" else 65535)
+
+    def band(r0: int, r1: int) -> bool:
+        x = rgb[r0:r1]
+        r, g, b = x[..., 0], x[..., 1], x[..., 2]
+        acc = np.empty(r.shape, np.float32)
+        tmp = np.empty(r.shape, np.float32)
+        ok = np.empty(r.shape, bool)
+        idx = np.empty(r.shape, np.int32) if integer else None
+        for c in range(3):
+            np.multiply(r, m[c, 0], out=acc)
+            np.multiply(g, m[c, 1], out=tmp)
+            acc += tmp
+            np.multiply(b, m[c, 2], out=tmp)
+            acc += tmp
+            np.isfinite(acc, out=ok)
+            if not ok.all():
+                return True
+            if flo > -np.inf or fhi < np.inf:
+                np.clip(acc, flo, fhi, out=acc)
+            if integer:
+                acc *= scale
+                np.rint(acc, out=acc)
+                idx[...] = acc
+                out[r0:r1, :, c] = table[idx] if table is not None else idx
+            else:
+                out[r0:r1, :, c] = srgb_oetf(acc) if curve == "srgb" else acc
+        return False
+
+    if run_bands(h, band, rows=BAND_ROWS):
+        raise ValueError("image data contains NaN or infinite values")
+    return out
+
+
+def quantise(data: np.ndarray, depth: str) -> np.ndarray:
+    """``round(clip(x, 0, 1) * (2^b - 1))`` as ``uint8``/``uint16`` (round half to even), on bands in threads.
+
+    Same values as ``np.round(np.clip(x, 0, 1) * top).astype(depth)`` on float32 data.
+
+    Raises
+    ------
+    ValueError
+        If ``data`` has a NaN or infinite value.
+    """
+    x = np.asarray(data, dtype=np.float32)
+    out = np.empty(x.shape, dtype=depth)
+    top = np.float32(255 if depth == "uint8" else 65535)
+    if x.ndim == 0 or x.shape[0] == 0:
+        if not np.all(np.isfinite(x)):
+            raise ValueError("image data contains NaN or infinite values")
+        out[...] = np.round(np.clip(x, 0, 1) * top)
+        return out
+
+    def band(r0: int, r1: int) -> bool:
+        v = x[r0:r1]
+        if not np.isfinite(v).all():
+            return True
+        t = np.clip(v, np.float32(0), np.float32(1))
+        t *= top
+        np.rint(t, out=t)
+        out[r0:r1] = t
+        return False
+
+    if run_bands(x.shape[0], band, rows=BAND_ROWS):
+        raise ValueError("image data contains NaN or infinite values")
+    return out

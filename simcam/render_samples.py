@@ -1,0 +1,237 @@
+"""Render a frame through a pipeline straight to output samples, fusing the display tail.
+
+:func:`render_samples` runs the pipeline's stages one by one, except its tail
+when that tail is made only of
+
+* linear maps: ``camera_to_xyz``, ``xyz_to_srgb``, ``tone`` with ``curve: none``
+  (a gain ``2^exposure``), which compose into one 3 x 3 matrix;
+* then ``clip`` stages (their bounds intersect);
+* then at most one ``gamma`` with ``curve: srgb``;
+* then at most one ``orientation``.
+
+That tail runs as one parallel pass (:func:`simcam.colour.display_kernel.encode_display`)
+writing the output samples directly; orientation is then a view of them.
+The samples equal the stage-by-stage render's quantised output within one
+code (the transfer curve is read from a table; the matrices are multiplied
+together first).
+
+Otherwise, a tail of per-pixel stages (:data:`PER_PIXEL`, in any order and with
+any parameters, e.g. a filmic tone curve or simple-camera-pipeline's power
+gamma and smoothstep) with at most one ``orientation`` among them runs band by
+band (:func:`render_banded`): each band of rows goes through the stages' own
+code and is quantised while it is in cache, bands on threads, and orientation
+(which commutes with per-pixel stages) is applied to the samples at the end.
+The samples are those of the stage-by-stage render (the same functions on the
+same pixels). Any other pipeline runs stage by stage, and the samples come
+from :func:`simcam.io.images.to_samples`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .frame import RawFrame
+
+_LINEAR = ("camera_to_xyz", "xyz_to_srgb", "tone")
+#: stages that act on each pixel alone (no neighbours, no randomness), so they can run on row bands
+PER_PIXEL = frozenset({"camera_to_xyz", "xyz_to_srgb", "tone", "clip", "gamma", "quantize"})
+#: rows per band of :func:`render_banded`
+BANDED_ROWS = 32
+
+
+@dataclass
+class Rendered:
+    """Output samples and the frame they came from (``frame.data`` is not filled for a fused tail).
+
+    ``kind`` is the signal kind of the samples, ``meta`` the metadata after the last stage.
+    """
+
+    samples: np.ndarray
+    kind: str
+    meta: object
+    depth: str
+
+
+def fusable_tail(stages) -> int:
+    """Index of the first stage of the fusable display tail of ``stages`` (``len(stages)`` if none)."""
+    n = len(stages)
+    i = n
+    if i and stages[i - 1].type == "orientation":
+        i -= 1
+    if i and stages[i - 1].type == "gamma" and stages[i - 1].params.curve == "srgb":
+        i -= 1
+    while i and stages[i - 1].type == "clip":
+        i -= 1
+    k = i
+    while k and _is_linear(stages[k - 1]):
+        k -= 1
+    if k == i:  # no matrix: nothing worth fusing
+        return n
+    return k
+
+
+def _is_linear(stage) -> bool:
+    if stage.type not in _LINEAR:
+        return False
+    return stage.type != "tone" or stage.params.curve == "none"
+
+
+def render_samples(pipe, frame: RawFrame, depth: str, *, seed: int | None = None, index: int = 0,
+                   progress=None, fuse: bool = True) -> Rendered:
+    """Run ``pipe`` on ``frame`` and return ``depth`` samples (``uint8``, ``uint16``, ``float32``, ``half``).
+
+    Parameters
+    ----------
+    pipe : simcam.pipeline.Pipeline
+        The pipeline; its random stages draw as in ``pipe(frame, seed=seed)``.
+    frame : RawFrame
+        Input frame of the pipeline's input kind.
+    depth : str
+        Output sample type.
+    seed : int, optional
+        Seed for random stages.
+    index : int
+        Item index of the random streams (``SeedSequence([seed, 0, index])``, as the pipeline's).
+    progress : callable, optional
+        Called with each stage's type after it ran (the fused or banded tail's stages together, at its end).
+    fuse : bool
+        Fuse the display tail (see the module docstring); False runs every stage.
+
+    Returns
+    -------
+    Rendered
+    """
+    from .io.images import to_samples
+
+    stages = pipe.stages
+    usable = fuse and frame.kind == pipe.input_kind
+    start = fusable_tail(stages) if usable else len(stages)
+    if start < len(stages):
+        head = _head(pipe, start)
+        frame = head(frame, seed=seed, index=index, progress=progress) if head is not None else frame
+        return _done(render_tail(stages[start:], frame, depth), stages[start:], progress)
+    start = banded_tail(stages) if usable else len(stages)
+    if start < len(stages):
+        head = _head(pipe, start)
+        frame = head(frame, seed=seed, index=index, progress=progress) if head is not None else frame
+        if frame.data.ndim == 3:
+            return _done(render_banded(stages[start:], frame, depth), stages[start:], progress)
+        for st in stages[start:]:  # a mosaic (e.g. a clip after normalize): per-pixel, but not RGB bands
+            frame = st(frame)
+        return _done(Rendered(to_samples(frame.data, depth), frame.kind, frame.meta, depth), stages[start:], progress)
+    out = pipe(frame, seed=seed, index=index, progress=progress)
+    return Rendered(to_samples(out.data, depth), out.kind, out.meta, depth)
+
+
+def _done(rendered: Rendered, tail, progress) -> Rendered:
+    if progress is not None:
+        for st in tail:
+            progress(st.type)
+    return rendered
+
+
+def banded_tail(stages) -> int:
+    """Index of the first stage of the longest tail of per-pixel stages (with at most one
+    ``orientation``) that follows an RGB stage; ``len(stages)`` if there is none."""
+    i, n_orient = len(stages), 0
+    while i and (stages[i - 1].type in PER_PIXEL or (stages[i - 1].type == "orientation" and n_orient == 0)):
+        n_orient += stages[i - 1].type == "orientation"
+        i -= 1
+    if i == 0 or all(s.type == "orientation" for s in stages[i:]):
+        return len(stages)
+    return i
+
+
+def render_banded(tail, frame: RawFrame, depth: str) -> Rendered:
+    """Run per-pixel stages (and one orientation, moved to the end) on bands of rows, quantising each band."""
+    from .errors import ImageIOError
+    from .parallel import run_bands
+    from .stages.orientation import orient
+
+    if frame.data.ndim != 3:
+        raise ValueError("render_banded: expected an H x W x 3 frame")
+    pixel = [s for s in tail if s.type != "orientation"]
+    orientation = next((s for s in tail if s.type == "orientation"), None)
+    h, w = frame.data.shape[:2]
+    out = np.empty((h, w, 3), depth if depth != "half" else np.float16)
+    last: list = []
+
+    def band(r0: int, r1: int) -> bool:
+        f = RawFrame(frame.data[r0:r1], frame.meta, kind=frame.kind)
+        for st in pixel:
+            f = st(f)
+        x = f.data
+        if not np.isfinite(x).all():
+            return True
+        if depth in ("uint8", "uint16"):  # as to_samples: round(clip(x, 0, 1) * top), half to even
+            x = np.clip(x, np.float32(0), np.float32(1)) * np.float32(255 if depth == "uint8" else 65535)
+            np.rint(x, out=x)
+        out[r0:r1] = x
+        if r0 == 0:
+            last.append(f)
+        return False
+
+    if run_bands(h, band, rows=BANDED_ROWS):
+        raise ImageIOError(f"{frame.meta.source or 'frame'}: image data contains NaN or infinite values")
+    kind, meta = last[0].kind, last[0].meta
+    if orientation is not None:
+        orientation.check_input(RawFrame(np.zeros((1, 1, 3), np.float32), meta, kind=kind))
+        value = orientation.transform_value(meta)
+        out = np.ascontiguousarray(orient(out, value))
+        meta = meta.copy()
+        meta.orientation = 1
+    return Rendered(out, kind, meta, depth)
+
+
+def _head(pipe, start: int):
+    """The pipeline of ``stages[:start]``; it draws the same random numbers as the whole pipeline
+    (``SeedSequence.spawn`` gives child k the same state whatever the number of children)."""
+    if start == 0:
+        return None
+    from .pipeline import Pipeline
+
+    return Pipeline(pipe.stages[:start], input_kind=pipe.input_kind, name=pipe.name, source=pipe.source)
+
+
+def render_tail(tail, frame: RawFrame, depth: str) -> Rendered:
+    """Run a fusable tail (``stages[fusable_tail(stages):]``) on ``frame`` in one pass; ``depth`` samples."""
+    from .colour.display import sidd_xyz_to_srgb_matrix, xyz_d50_to_linear_srgb_matrix
+    from .colour.display_kernel import encode_display
+    from .errors import ImageIOError
+    from .stages.orientation import orient
+
+    m = np.eye(3)
+    lo, hi = -np.inf, np.inf
+    curve, kind, meta, orientation = "linear", frame.kind, frame.meta, None
+    for st in tail:
+        t = st.type
+        if t == "camera_to_xyz":
+            m = st.matrix(meta) @ m
+            kind = "xyz"
+        elif t == "xyz_to_srgb":
+            s = sidd_xyz_to_srgb_matrix() if st.params.mode == "sidd" else xyz_d50_to_linear_srgb_matrix()
+            m = s @ m
+            kind = "linear_srgb"
+        elif t == "tone":
+            m = (2.0 ** st.params.exposure) * m
+        elif t == "clip":  # clip[l2, h2] after clip[lo, hi] is clip[clip(lo, l2, h2), clip(hi, l2, h2)]
+            l2 = -np.inf if st.params.low is None else st.params.low
+            h2 = np.inf if st.params.high is None else st.params.high
+            lo, hi = float(np.clip(lo, l2, h2)), float(np.clip(hi, l2, h2))
+        elif t == "gamma":
+            curve, kind = "srgb", "display"
+        elif t == "orientation":
+            orientation = st
+    try:
+        samples = encode_display(frame.data, m, lo=None if np.isinf(lo) else lo, hi=None if np.isinf(hi) else hi,
+                                 curve=curve, depth=depth)
+    except ValueError as exc:
+        raise ImageIOError(f"{meta.source or 'frame'}: {exc}") from None
+    if orientation is not None:
+        value = orientation.transform_value(meta)
+        samples = np.ascontiguousarray(orient(samples, value))
+        meta = meta.copy()
+        meta.orientation = 1
+    return Rendered(samples, kind, meta, depth)
