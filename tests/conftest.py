@@ -7,19 +7,9 @@ test with a reason when it is absent (the data is never copied into the repo).
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
 import pytest
-
-REPO = Path(__file__).resolve().parent.parent
-SHARED_DATA = Path(os.environ.get("SIMCAM_SHARED_DATA", REPO.parent / "shared" / "data"))
-
-
-def shared_path(rel: str) -> Path:
-    p = SHARED_DATA / rel
-    if not p.exists():
-        pytest.skip(f"shared data file {rel} not found under {SHARED_DATA}")
-    return p
+from shared_data import REPO, SHARED_DATA, shared_path  # noqa: F401  (re-exported for fixtures)
 
 
 @pytest.fixture

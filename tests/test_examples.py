@@ -8,7 +8,7 @@ import sys
 import numpy as np
 import rawpy
 
-from conftest import REPO
+from shared_data import REPO
 
 EXAMPLE = REPO / "examples" / "data" / "chart.dng"
 

@@ -149,7 +149,7 @@ def test_untagged_kinds_and_integer_samples(tmp_path):
 
 
 def test_cli_render_outputs(tmp_path):
-    from conftest import REPO
+    from shared_data import REPO
 
     from simcam.cli import main
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import re
 
-from conftest import REPO
+from shared_data import REPO
 
 
 def setup_commands() -> list[str]:

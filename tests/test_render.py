@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import REPO, shared_path
+from shared_data import REPO, shared_path
 from simcam.cli import main
 from simcam.io.dng import read_dng
 from simcam.io.images import read_image

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import REPO, shared_path
+from shared_data import REPO, shared_path
 
 from simcam.colour.display_kernel import encode_display, quantise
 from simcam.io.dng import read_dng

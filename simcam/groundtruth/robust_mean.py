@@ -116,6 +116,24 @@ def _sorted_with_censoring(x: np.ndarray, lo: float, hi: float):
     return key, n_fin, n_low, n_high
 
 
+def _weighted_row_sums(m: np.ndarray, x: np.ndarray, cols: np.ndarray, chunk: int = 8192) -> np.ndarray:
+    """``[m @ c0, m @ c1, m @ c2, x @ c0, x @ c1]`` (float32 products, float64 result) for P x N rows.
+
+    Row by row with numpy's own summation over the contiguous last axis instead of a BLAS
+    matrix-vector product: BLAS kernels block rows differently for different row counts, so a
+    pixel's sum would depend on the tile it falls in (a ground truth that changes in the last bits
+    with ``tile_pixels``); here each row's sum depends only on that row.
+    """
+    P = m.shape[0]
+    out = np.empty((5, P), dtype=np.float64)
+    for r0 in range(0, P, chunk):
+        mc = m[r0:r0 + chunk].astype(np.float32)
+        xc = x[r0:r0 + chunk]
+        for k, (a, c) in enumerate(((mc, 0), (mc, 1), (mc, 2), (xc, 0), (xc, 1))):
+            out[k, r0:r0 + chunk] = np.multiply(a, cols[c]).sum(axis=1, dtype=np.float32)
+    return out
+
+
 def wls_cdf_fit(samples: np.ndarray, *, lo: float = 0.0, hi: float = 1.0, refine: int = 0,
                 min_samples: int = 3, axis: int = 0, nlf: tuple[float, float] | None = None) -> RobustMean:
     """WLS fit of a normal CDF to the censored empirical CDF, per pixel (Abdelhamed 2020, eq. 5.8-5.12).
@@ -156,13 +174,7 @@ def wls_cdf_fit(samples: np.ndarray, *, lo: float = 0.0, hi: float = 1.0, refine
     if full.any():  # common case: every sample present, rank positions shared by all pixels
         _, z, u = _positions_full(N)
         cols = np.stack([u, u * z, u * z * z]).astype(np.float32)        # (3, N)
-        mf = m[full].astype(np.float32)
-        xf = xs[full]
-        S[0, full] = mf @ cols[0]
-        S[1, full] = mf @ cols[1]
-        S[2, full] = mf @ cols[2]
-        S[3, full] = xf @ cols[0]
-        S[4, full] = xf @ cols[1]
+        S[:, full] = _weighted_row_sums(m[full], xs[full], cols)
     part = ~full
     if part.any():  # pixels with missing (NaN) samples: per-pixel rank positions
         _, z, u = _positions(n_fin[part][:, None], N)

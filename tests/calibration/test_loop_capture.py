@@ -126,7 +126,7 @@ def test_reads_sidd_style_scene(tmp_path):
 
     import scipy.io
 
-    from conftest import shared_path
+    from shared_data import shared_path
 
     md = shared_path("sidd/0001_METADATA_RAW_010.MAT")
     d = tmp_path / "cap" / "0001_001_S6_00100_00060_3200_L"

@@ -4,7 +4,7 @@ import re
 
 import pytest
 
-from conftest import shared_path
+from shared_data import shared_path
 from simcam.calibration.capture import read_emva1288
 from simcam.calibration.photon_transfer import emva1288_numbers
 

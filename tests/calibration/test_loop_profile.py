@@ -43,9 +43,10 @@ def test_round_trip_through_noise_profile():
 
 
 def test_profile_is_accepted_by_the_noise_stage():
-    profiles = pytest.importorskip("simcam.profiles", reason="simcam.noise (issue 3) not merged yet")
+    from simcam.profiles.schema import profile_from_dict
+
     doc = noise_profile([_Res(_model())], _Cap())
-    prof = profiles.profile_from_dict(doc, source="profile.yaml")
+    prof = profile_from_dict(doc, source="profile.yaml")
     model = prof.model_for(800)
     assert type(model).__name__.lower().startswith("composite")
 

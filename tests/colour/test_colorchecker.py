@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conftest import shared_path
+from shared_data import shared_path
 
 colour = pytest.importorskip("colour")
 rawpy = pytest.importorskip("rawpy")

@@ -12,7 +12,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from conftest import shared_path
+from shared_data import shared_path
 from simcam.colour import dng as D
 from simcam.errors import MetadataError
 

@@ -81,7 +81,7 @@ def test_gt_on_a_sidd_scene_instance_layout(tmp_path):
     """SIDD's layout: <instance>/<id>_NOISY_RAW_NNN.MAT frames + _GT_RAW_ + _METADATA_RAW_ (from the shared data)."""
     import scipy.io
 
-    from conftest import shared_path
+    from shared_data import shared_path
     from simcam.cli import main
 
     meta = shared_path("sidd/0001_METADATA_RAW_010.MAT")

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import tifffile
 
-from conftest import REPO, shared_path
+from shared_data import REPO, shared_path
 from dng_fixtures import file_sha256, make_dng  # noqa: F401  (fixture)
 from simcam.cli import main
 from simcam.errors import DngError

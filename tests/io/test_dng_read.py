@@ -7,7 +7,7 @@ import pytest
 import rawpy
 import tifffile
 
-from conftest import shared_path
+from shared_data import shared_path
 from dng_fixtures import file_sha256
 from simcam.io.dng import read_dng, read_dng_meta
 

@@ -10,7 +10,7 @@ import rawpy
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from conftest import shared_path
+from shared_data import shared_path
 from dng_fixtures import file_sha256, make_dng  # noqa: F401  (fixture)
 from simcam.cfa import BAYER_PATTERNS
 from simcam.errors import DngError

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import tifffile
 
-from conftest import shared_path
+from shared_data import shared_path
 from simcam.errors import DngError
 from simcam.frame import GainMap, Opcode
 from simcam.io.dng import read_dng_meta

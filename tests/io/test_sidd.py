@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import scipy.io
 
-from conftest import shared_path
+from shared_data import shared_path
 from simcam.cli import main
 from simcam.errors import DatasetError, MetadataError
 from simcam.io.opcodes import parse_opcode_list, serialise_opcode_list

@@ -106,7 +106,7 @@ def small_onnx():
 
 
 def _weights():
-    from tests.conftest import shared_path
+    from shared_data import shared_path
 
     return str(shared_path("noiseflow/noiseflow_weights.npz"))
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import rawpy
 
-from conftest import REPO
+from shared_data import REPO
 from simcam.cli import main
 from simcam.errors import DatasetError
 from simcam.io.sample_dng import make_test_dng

@@ -15,7 +15,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import shared_path
+from shared_data import shared_path
 from simcam.errors import StageError
 from simcam.frame import RawFrame
 from simcam.io.dng import read_dng_meta

@@ -110,7 +110,7 @@ def test_unsupported_opcode_optional_warns_required_raises():
 
 def test_fusion_lateral_chromatic_aberration_is_applied():
     """The GoPro Fusion's OpcodeList3 WarpRectilinear (per-plane scale): red and blue move at the edge only."""
-    from conftest import shared_path
+    from shared_data import shared_path
 
     from simcam.io.dng import read_dng
     from simcam.pipeline import Pipeline

@@ -113,7 +113,7 @@ def test_highlights_in_a_pipeline():
 def test_spot_white_balance_on_the_chart_matches_libraw_patch_means():
     """A spot on the ColorChecker's neutral 5 patch gives the neutral that LibRaw's mosaic shows there."""
     rawpy = pytest.importorskip("rawpy")
-    from conftest import shared_path
+    from shared_data import shared_path
 
     from simcam.io.dng import read_dng
     from simcam.pipeline import Pipeline
