@@ -53,6 +53,9 @@ class Sequence:
     summary: "FrameSummary | None" = None
     #: True when ``frames`` holds only the loop's analysed region (:mod:`simcam.calibration.region`)
     region_applied: bool = False
+    #: EMVA 1288 R4.0 per-channel point statistics over whole frames (dark and flat sequences with
+    #: an exposure time; :class:`simcam.calibration.emva1288.PointStats`), else None
+    emva_stats: list | None = None
 
     @property
     def n(self) -> int:
@@ -186,13 +189,22 @@ class _SequenceBuilder:
     """Frames of one sequence as they are read: whole-frame statistics accumulated, only the loop's
     analysed region kept (all of the frame when ``region`` is None)."""
 
-    def __init__(self, kind: str, white: float, region=None):
+    def __init__(self, kind: str, white: float, region=None, *, exposure_s: float | None = None,
+                 photons: float | None = None, cfa: str | None = None):
         self.acc = FrameAccumulator(keep_mean_map=kind == "dark")
         self.white, self.region, self.plan = white, region, None
         self.kept: list[np.ndarray] = []
+        self.emva = None  # EMVA 1288 R4.0 point statistics over whole frames, in the same pass
+        if kind in ("dark", "flat") and exposure_s is not None and exposure_s > 0:
+            from .emva1288 import OperatingPoint, PointAccumulator
+
+            point = OperatingPoint("dark" if kind == "dark" else "bright", float(exposure_s), (), photons)
+            self.emva = PointAccumulator(point, cfa)
 
     def add(self, frame: np.ndarray) -> None:
         self.acc.add(frame, self.white)
+        if self.emva is not None:
+            self.emva.add(frame)
         if self.region is not None:
             if self.plan is None:
                 self.plan = self.region.plan(*frame.shape)
@@ -201,6 +213,28 @@ class _SequenceBuilder:
 
     def finish(self) -> tuple[np.ndarray, "FrameSummary"]:
         return np.stack(self.kept), self.acc.result()
+
+    def emva_stats(self) -> list | None:
+        return None if self.emva is None else self.emva.finish(keep_map=True)
+
+
+def keep_spatial_maps(seqs: list[Sequence]) -> None:
+    """Keep the EMVA mean maps of one dark and one flat per ISO (the most frames: EMVA 1288 R4.0 evaluates
+    the non-uniformities on one dark and one bright point); drop the others' as soon as they are read."""
+    best: dict[tuple[int, str], Sequence] = {}
+    for s in seqs:
+        if not s.emva_stats or s.emva_stats[0].mean_map is None:
+            continue
+        key = (s.iso, s.kind)
+        cur = best.get(key)
+        if cur is None or s.n > cur.n:
+            if cur is not None:
+                for st in cur.emva_stats:
+                    st.mean_map = None
+            best[key] = s
+        else:
+            for st in s.emva_stats:
+                st.mean_map = None
 
 
 def _progress(total: int, desc: str, enabled: bool | None):
@@ -243,6 +277,7 @@ def read_capture_set(path: str | Path, *, check_saturation: bool = True, region=
     with _progress(total, "reading frames", progress) as bar:
         for d in dirs:
             seqs.append(_read_sequence_dir(d, region, bar))
+            keep_spatial_maps(seqs)
     if not seqs:
         raise DatasetError(f"{path}: no sequence sub-directories; expected dark*/, flat*/ or scene directories of frames")
     cs = CaptureSet(str(path), "directory", seqs)
@@ -293,7 +328,8 @@ def _read_sequence_dir(d: Path, region=None, bar=None) -> Sequence:
                                    "expected fixed settings within a sequence")
         if builder is None:
             first_shape = arr.shape
-            builder = _SequenceBuilder(sequence_kind(d.name), float(meta["white"]), region)
+            builder = _SequenceBuilder(sequence_kind(d.name), float(meta["white"]), region,
+                                       exposure_s=meta["exposure_s"], cfa=meta["cfa"])
         builder.add(arr)
         metas.append(meta)
         if bar is not None:
@@ -317,7 +353,7 @@ def _read_sequence_dir(d: Path, region=None, bar=None) -> Sequence:
         name=d.name, kind=sequence_kind(d.name), frames=frames,
         iso=int(round(m["iso"])) if m["iso"] is not None else 0, exposure_s=m["exposure_s"], cfa=m["cfa"],
         black_dn=m["black"], white_dn=float(m["white"]), clean=clean, source=str(d), summary=summary,
-        region_applied=region is not None,
+        region_applied=region is not None, emva_stats=builder.emva_stats(),
     )
 
 
@@ -478,14 +514,17 @@ def read_emva1288(descriptor: str | Path, *, region=None, progress: bool | None 
             if len(b["files"]) < 2:
                 raise DatasetError(f"{descriptor}: block {name} (exposure {b['exp_ns']:g} ns) has "
                                    f"{len(b['files'])} image(s); expected >= 2")
-            builder = _SequenceBuilder(b["kind"], white, region)
+            builder = _SequenceBuilder(b["kind"], white, region, exposure_s=b["exp_ns"] * 1e-9,
+                                       photons=b["photons"] if b["kind"] == "flat" else 0.0)
             for f in b["files"]:
                 builder.add(_read_png(f, (height, width)))
                 bar.update(1)
             frames, summary = builder.finish()
             seqs.append(Sequence(name=name, kind=b["kind"], frames=frames, iso=0, exposure_s=b["exp_ns"] * 1e-9,
                                  cfa=None, black_dn=None, white_dn=white, photons=b["photons"],
-                                 source=f"{descriptor}:{name}", summary=summary, region_applied=region is not None))
+                                 source=f"{descriptor}:{name}", summary=summary, region_applied=region is not None,
+                                 emva_stats=builder.emva_stats()))
+            keep_spatial_maps(seqs)
     cs = CaptureSet(str(descriptor), "emva1288", seqs,
                     notes=["EMVA 1288 descriptor: monochrome, no declared black level (black taken from the darks), "
                            "ISO not given"])

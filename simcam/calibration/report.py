@@ -475,6 +475,111 @@ def _family_table(h: dict) -> str:
     return "".join(rows)
 
 
+_EMVA_ROWS = (  # (key, label, digits) of the EMVA 1288 R4.0 summary table (the standard's data sheet order)
+    ("system_gain", "System gain K", 4), ("inverse_system_gain", "1/K", 4),
+    ("dark_noise_e", "Temporal dark noise σ_d", 4), ("dark_noise_dn", "Temporal dark noise σ_y.dark", 4),
+    ("quantum_efficiency", "Quantum efficiency η", 3), ("responsivity", "Responsivity R", 4),
+    ("saturation_capacity_e", "Saturation capacity μ_e.sat", 4), ("saturation_signal_dn", "Saturation signal μ_y.sat", 4),
+    ("sensitivity_threshold_e", "Absolute sensitivity threshold μ_e.min", 4),
+    ("snr_max", "SNR max", 4), ("snr_max_db", "SNR max", 3), ("dynamic_range", "Dynamic range", 4),
+    ("dynamic_range_db", "Dynamic range", 3), ("linearity_error_min", "Linearity error LE min", 3),
+    ("linearity_error_max", "Linearity error LE max", 3),
+    ("dark_current_mean_e_s", "Dark current (mean method)", 4), ("dark_current_var_e_s", "Dark current (variance method)", 4),
+)
+_EMVA_SPLIT = (("dsnu_e", "DSNU"), ("prnu_percent", "PRNU"))
+
+
+def _emva_value(v) -> str:
+    if not isinstance(v, dict):
+        return "–"
+    if v.get("value") is None:
+        return f"n/a ({html.escape(str(v.get('reason', 'not measurable')))})"
+    return f"{_num(v['value'], 4)} {html.escape(v.get('unit', ''))}"
+
+
+def emva1288_r4_html(e: dict | None) -> str:
+    """The EMVA 1288 R4.0 data-sheet table of one ISO (channels as columns), DSNU / PRNU split into
+    total, row, column and pixel parts (EMVA 1288 R4.0, sec. 8), with the reason where a figure is not
+    measurable on the data."""
+    if not e:
+        return ""
+    if "not_applicable" in e:
+        return f"<p>EMVA 1288 R4.0: not applicable ({html.escape(e['not_applicable'])}).</p>"
+    chans = e["channels"]
+    names = list(chans)
+    head = "".join(f"<th>{html.escape(n)}</th>" for n in names)
+    rows = [f"<h3>{html.escape(e.get('standard', 'EMVA 1288'))}</h3><table><tr><th>quantity</th>{head}</tr>"]
+    for key, label, _ in _EMVA_ROWS:
+        if any(key in chans[n] for n in names):
+            rows.append(f"<tr><td class=l>{label}</td>" + "".join(
+                f"<td>{_emva_value(chans[n].get(key))}</td>" for n in names) + "</tr>")
+    for key, label in _EMVA_SPLIT:
+        for part in ("total", "row", "column", "pixel"):
+            if any(isinstance(chans[n].get(key), dict) and part in chans[n][key] for n in names):
+                rows.append(f"<tr><td class=l>{label} {part}</td>" + "".join(
+                    f"<td>{_emva_value((chans[n].get(key) or {}).get(part))}</td>" for n in names) + "</tr>")
+    rows.append("</table>")
+    notes = sorted({note for n in names for note in chans[n].get("notes", [])})
+    rows += [f"<p><i>{html.escape(n)}</i></p>" for n in notes]
+    return "".join(rows)
+
+
+def emva1288_r4_figure(e: dict | None) -> str | None:
+    """One base64 PNG of an ISO's EMVA 1288 R4.0 results: photon transfer (variance vs mean, with the
+    fit range), the horizontal and vertical DSNU / PRNU spectrograms, and the logarithmic accumulated
+    histograms of DSNU / PRNU (EMVA 1288 R4.0, sec. 8.2-8.3), one line per channel."""
+    if not e or "channels" not in e:
+        return None
+    from ..errors import require_extra
+
+    require_extra("matplotlib", "plot")
+    import matplotlib.pyplot as plt
+
+    chans = e["channels"]
+    fig, ax = plt.subplots(2, 3, figsize=(13, 6.6))
+    for name, c in chans.items():
+        pt = c.get("photon_transfer") or {}
+        if pt.get("mean_dn"):
+            m = np.asarray(pt["mean_dn"]) - np.asarray(pt["dark_mean_dn"])
+            v = np.asarray(pt["var_dn2"]) - np.asarray(pt["dark_var_dn2"])
+            ax[0, 0].plot(m, v, ".", ms=4, label=name)
+            i0, i1 = pt.get("fit_indices") or (0, len(m) - 1)
+            K = (c.get("system_gain") or {}).get("value")
+            if K:
+                xs = np.array([0.0, m[i1]])
+                ax[0, 0].plot(xs, K * xs, "-", lw=1)
+        for j, key in enumerate(("dsnu_horizontal", "prnu_horizontal")):
+            sp = (c.get("spectrograms") or {}).get(key)
+            if sp:
+                ax[0, 1 + j].semilogy(sp["frequency"][1:], np.maximum(sp["amplitude"][1:], 1e-6), lw=0.7, label=name)
+                ax[0, 1 + j].set_ylabel(f"amplitude ({sp['unit']})", fontsize=8)
+        for j, key in enumerate(("dsnu_vertical", "prnu_vertical")):
+            sp = (c.get("spectrograms") or {}).get(key)
+            if sp:
+                ax[1, j].semilogy(sp["frequency"][1:], np.maximum(sp["amplitude"][1:], 1e-6), lw=0.7, label=name)
+                ax[1, j].set_ylabel(f"amplitude ({sp['unit']})", fontsize=8)
+        for key, style in (("dsnu", "-"), ("prnu", "--")):
+            h = (c.get("histograms") or {}).get(key)
+            if h and h.get("accumulated_percent"):
+                ax[1, 2].semilogy(h["abs_edges"][:len(h["accumulated_percent"])],
+                                  np.maximum(h["accumulated_percent"], 1e-4), style, lw=1,
+                                  label=f"{name} {key.upper()} ({h['unit']})")
+    titles = [["Photon transfer: σ²_y − σ²_y.dark vs μ_y − μ_y.dark (DN)", "DSNU spectrogram, horizontal",
+               "PRNU spectrogram, horizontal"],
+              ["DSNU spectrogram, vertical", "PRNU spectrogram, vertical", "Accumulated histograms |deviation|"]]
+    for r in range(2):
+        for k in range(3):
+            ax[r, k].set_title(titles[r][k], fontsize=9)
+            ax[r, k].tick_params(labelsize=7)
+            if ax[r, k].lines:
+                ax[r, k].legend(fontsize=6)
+    for a in (ax[0, 1], ax[0, 2], ax[1, 0], ax[1, 1]):
+        a.set_xlabel("cycles / pixel", fontsize=8)
+    ax[1, 2].set_ylabel("% of pixels", fontsize=8)
+    fig.tight_layout()
+    return _png(fig)
+
+
 def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
     parts = ["<!doctype html><html><head><meta charset='utf-8'><title>simcam loop report</title>",
              "<style>body{font-family:sans-serif;margin:2em;max-width:1200px} table{border-collapse:collapse;"
@@ -508,6 +613,10 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
                          "EMVA 1288 numbers and the dark current use every pixel of every frame.</p>")
         parts.append(_model_table(g))
         parts.append(_dark_table(g.get("dark_current")))
+        parts.append(emva1288_r4_html(g.get("emva1288")))
+        if figs.get(iso, {}).get("emva1288"):
+            parts.append("<img alt='EMVA 1288 R4.0 plots' style='max-width:100%;height:auto' "
+                         f"src='data:image/png;base64,{figs[iso]['emva1288']}'>")
         parts.append(_family_table(g["heldout"]))
         if g.get("remaining_families"):
             parts.append("<p>Families still significant under the final model:</p><ul>" + "".join(
@@ -561,6 +670,31 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
     Path(path).write_text("\n".join(parts))
 
 
+def emva1288_r4_results(capture) -> dict[int, dict]:
+    """EMVA 1288 R4.0 (Linear) results per ISO from the whole-frame point statistics the reader kept
+    (:mod:`simcam.calibration.emva1288`); an ISO without dark and flat points at known exposures gets
+    ``{"not_applicable": reason}``."""
+    from .emva1288 import Emva1288Error, Emva1288Report, cfa_channels, characterise_stats
+
+    out: dict[int, dict] = {}
+    for iso in capture.isos():
+        seqs = [s for s in capture.group(iso) if s.emva_stats]
+        kinds = {s.kind for s in seqs}
+        if not {"dark", "flat"} <= kinds:
+            out[iso] = {"not_applicable": "EMVA 1288 needs dark and flat sequences with their exposure times; "
+                                          f"this ISO has {sorted(kinds) or 'none'}"}
+            continue
+        cfa = seqs[0].cfa
+        names = [n for n, _, _ in cfa_channels(cfa)]
+        try:
+            rep = Emva1288Report({n: characterise_stats([s.emva_stats[i] for s in seqs], channel=n)
+                                  for i, n in enumerate(names)}, None if cfa is None else str(cfa).upper())
+            out[iso] = rep.to_dict()
+        except Emva1288Error as exc:
+            out[iso] = {"not_applicable": str(exc)}
+    return out
+
+
 def run_and_write(capture_dir: str | Path, out_dir: str | Path, *, start_profile: str | Path | None = None,
                   cfg: LoopConfig | None = None) -> dict:
     """Read a capture set, run the loop, write profile.yaml, report.json, report.html; return the report."""
@@ -587,7 +721,7 @@ def run_and_write(capture_dir: str | Path, out_dir: str | Path, *, start_profile
         e = emva.get(r.iso) or {}
         K = e.get("K_dn_per_e") or (r.base.K if r.base.K > 0 else None)
         dark[r.iso] = dark_current([s for s in capture.group(r.iso) if s.kind == "dark"], K)
-    doc = build_report(results, capture, cfg, emva, dark)
+    doc = build_report(results, capture, cfg, emva, dark, emva1288_r4=emva1288_r4_results(capture))
     out_dir.mkdir(parents=True, exist_ok=True)
     from .profile import noise_profile
 
@@ -595,5 +729,9 @@ def run_and_write(capture_dir: str | Path, out_dir: str | Path, *, start_profile
     write_yaml(out_dir / "loop_model.yaml", loop_model_dict(results, capture))
     (out_dir / "report.json").write_text(json.dumps(doc, indent=2))
     figs = {r.iso: figures(r, cfg.seed) for r in results}
+    for g in doc["isos"]:
+        emva_png = emva1288_r4_figure(g.get("emva1288"))
+        if emva_png:
+            figs.setdefault(g["iso"], {})["emva1288"] = emva_png
     write_html(out_dir / "report.html", doc, figs)
     return doc
