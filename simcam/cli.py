@@ -100,8 +100,17 @@ def _plain_metavars(typer_app: typer.Typer) -> None:
         _plain_metavars(group.typer_instance)
 
 
+def _plain_argument_help() -> None:
+    """Arguments show their metavar alone (``FILE``, ``INPUT...``): typer >= 0.2x adds the Python type
+    (``<path>``, ``<list[Path]>``) after it, which tells a user nothing the metavar and help do not."""
+    argument = getattr(typer.core, "TyperArgument", None)
+    if argument is not None and hasattr(argument, "display_type_rich"):
+        argument.display_type_rich = lambda self, ctx: None
+
+
 _register_commands()
 _plain_metavars(app)
+_plain_argument_help()
 
 
 def _click_exceptions() -> ModuleType:

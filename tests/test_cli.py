@@ -60,3 +60,13 @@ def test_render_missing_input_exit_2_and_no_output(tmp_path):
 def test_render_bad_set_option(tmp_path):
     r = run_cli("render", "x.dng", "-o", str(tmp_path / "o.png"), "--set", "noequals")
     assert r.returncode == 2 and "STAGE.PARAM=VALUE" in r.stderr
+
+
+def test_help_shows_no_python_types(capsys):
+    """Options show PATH / INT / NUM / TEXT, flags nothing, arguments their name: never ``<bool>``,
+    ``<path>`` or ``<list[Path]>`` (what typer >= 0.2x prints by itself)."""
+    for cmd in ("render", "synth", "gt", "loop", "info", "bench", "validate"):
+        assert main([cmd, "--help"]) == 0
+        out = capsys.readouterr().out
+        for bad in ("<bool>", "<path>", "<list[", "<int>", "<str>", "<float>"):
+            assert bad not in out, (cmd, bad)
