@@ -3,9 +3,10 @@
 Each diagnostic maps a capture (dark / flat / scene frame stacks in DN) to one
 number. The loop computes it on the measured frames and on frames simulated
 from the current model (same shapes and frame counts) and standardises the
-difference (:func:`discrepancy`). Names, the effect each one points to, and
-the statistic (EMVA 1288 R4.0 sec. 8 for the spatial split, ELD/Wei et al.
-2020 for row noise and Tukey-lambda PPCC):
+difference (:func:`discrepancy`). Names, the effect each one points to (as the
+effects' cards in :mod:`simcam.calibration.effects` declare it), and the
+statistic (EMVA 1288 R4.0 sec. 8 for the spatial split, ELD/Wei et al. 2020
+for row noise and Tukey-lambda PPCC):
 
 ======================  ==================  =====================================================
 diagnostic              effect              statistic
@@ -52,27 +53,15 @@ from scipy import stats as sst
 
 PLANE_OFFSETS = ((0, 0), (0, 1), (1, 0), (1, 1))
 
-DIAGNOSTIC_EFFECT = {
-    "ptc_curvature": "nonlinearity",
-    "plane_gain_spread": "channel_gain",
-    "row_mean_excess": "row_noise",
-    "row_spectrum_peak": "periodic_pattern",
-    "col_spectrum_peak": "periodic_pattern",
-    "col_temporal_excess": None,
-    "dark_checker_jitter": None,
-    "col_fpn_excess": "column_fpn",
-    "dsnu_excess": "dsnu",
-    "hot_pixel_tail": "hot_pixels",
-    "prnu_excess": "prnu",
-    "black_offset": "black_level_offset",
-    "frame_mean_jitter": "frame_flicker",
-    "dark_tail_mass": "heavy_tail_read",
-    "dark_ppcc_lambda": "heavy_tail_read",
-    "code_occupancy": "quantization",
-    "lag1_corr": "spatial_correlation",
-    "lag2_corr": "spatial_correlation",
-}
-DIAGNOSTICS = tuple(DIAGNOSTIC_EFFECT)
+#: The battery, in report order. The effect each one proposes is on the effect's card
+#: (``EffectCard.diagnostics``, :mod:`simcam.calibration.effects`); a diagnostic no card claims
+#: (``col_temporal_excess``, ``dark_checker_jitter``) proposes none.
+DIAGNOSTICS = (
+    "ptc_curvature", "plane_gain_spread", "row_mean_excess", "row_spectrum_peak", "col_spectrum_peak",
+    "col_temporal_excess", "dark_checker_jitter", "col_fpn_excess", "dsnu_excess", "hot_pixel_tail", "prnu_excess",
+    "black_offset", "frame_mean_jitter", "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "lag1_corr",
+    "lag2_corr",
+)
 
 #: When the diagnostic on the left is chosen but one on the right is also
 #: significant, the right one is taken first: it is the more specific symptom
@@ -153,6 +142,20 @@ class CaptureData:
     white_dn: float
     cfa: str | None
     cache: dict = field(default_factory=dict)
+
+    def like(self, frames: list, specs: list) -> "CaptureData":
+        """A capture with this one's structure (black, white, CFA) holding ``frames``, one (n, H, W) stack
+        per sequence of ``specs`` (``SimSpec``: kind; a scene's clean reference is its ``signal_dn``
+        unless ``fixed_in_clean``): simulated captures as the diagnostics see them."""
+        darks, flats, scenes = [], [], []
+        for sp, f in zip(specs, frames, strict=True):
+            if sp.kind == "dark":
+                darks.append(f)
+            elif sp.kind == "flat":
+                flats.append(f)
+            else:
+                scenes.append((f, None if sp.fixed_in_clean else sp.signal_dn))
+        return CaptureData(darks, flats, scenes, self.black_dn, self.white_dn, self.cfa)
 
     # ---- shared intermediates (cached) ---------------------------------
     def temporal_residuals(self, which: str) -> list[np.ndarray]:

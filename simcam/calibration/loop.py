@@ -4,7 +4,7 @@ Per ISO group of a capture set:
 
 1. Frames of each sequence are split in time: the first half fits, the second
    half is held out (sequences of < 4 frames only fit).
-2. Base fit (:func:`simcam.calibration.effects.base_fit`).
+2. Base fit (:func:`simcam.calibration.fit.base_fit`).
 3. Every diagnostic of :mod:`simcam.calibration.diagnostics` is computed on the
    fit frames and on ``replicates`` captures simulated from the current model
    (parametric bootstrap, same shapes and frame counts); standardised
@@ -12,7 +12,8 @@ Per ISO group of a capture set:
    procedure at family-wise ``alpha`` (default 0.01) over the applicable
    diagnostics.
 4. The most significant diagnostic (with the precedence rules of
-   ``diagnostics.PRECEDENCE``) names an effect; its parameters are fitted; the
+   ``diagnostics.PRECEDENCE``) names an effect (the one whose card lists it,
+   :mod:`simcam.calibration.effects`); its card fits the parameters; the
    candidate model is simulated again. On held-out frames: the pixel marginal
    KL (Noise Flow binning, Jeffreys-smoothed model histogram) with its
    sampling floor and excess, the structured marginal KL of aggregated noise
@@ -39,7 +40,8 @@ import numpy as np
 from ..errors import DatasetError
 from . import diagnostics as dg
 from .capture import CaptureSet, Sequence
-from .effects import base_fit, ctx_like, fit_effect
+from .effects import FitContext, card_for, effect_for
+from .fit import base_fit, fit_effect
 from .heldout import KL_EDGES, StructuredKL, kl_counts, kl_floor
 from .model import LoopModel, SimSpec, marginal_variance, site_map
 from .region import DEFAULT_MAX_PIXELS, DEFAULT_TILE, Region
@@ -157,7 +159,7 @@ class Group:
 
     def specs(self, model: LoopModel, part) -> list[SimSpec]:
         out = []
-        offs = np.asarray(model.effects.get("black_level_offset", {}).get("offset_dn", [0.0] * 4))
+        offs = model.black_offset_dn()
         for s, f, clean in part:
             shape = f.shape[1:]
             base = site_map(model.black_dn.ravel() + offs, shape)
@@ -183,7 +185,7 @@ def _thin(x: np.ndarray, n: int = PLOT_VALUES) -> np.ndarray:
 
 
 def _capture(group: Group, part, sims, specs) -> dg.CaptureData:
-    return ctx_like(group.fit_data if part is group.fit else group.held_data, sims, specs)
+    return (group.fit_data if part is group.fit else group.held_data).like(sims, specs)
 
 
 def noise_frames(part, frames_list, specs, model: LoopModel) -> list[np.ndarray]:
@@ -191,7 +193,7 @@ def noise_frames(part, frames_list, specs, model: LoopModel) -> list[np.ndarray]
     under the model (black + black offset + signal of its :class:`SimSpec`), the same reference for data
     and simulations (so discrete ADC codes fall on the same lattice in both)."""
     fs = model.full_scale_dn
-    offs = np.asarray(model.effects.get("black_level_offset", {}).get("offset_dn", [0.0] * 4))
+    offs = model.black_offset_dn()
     out = []
     for fr, sp in zip(frames_list, specs):
         ref = sp.signal_dn + site_map(model.black_dn.ravel() + offs, sp.signal_dn.shape)
@@ -226,22 +228,6 @@ HELDOUT_KEYS = ("kl", "nll", "kl_floor", "kl_excess", "kl_structured", "structur
 def _summary(held: dict) -> dict:
     """The held-out numbers kept in a :class:`GroupResult` (no sample arrays)."""
     return {k: held[k] for k in HELDOUT_KEYS}
-
-
-def _null_parameters(effect: str, p: dict) -> bool:
-    """True when the fitted effect is the identity (nothing to add)."""
-    keys = {"row_noise": "sigma_dn", "column_fpn": "sigma_dn", "dsnu": "sigma_dn", "prnu": "sigma",
-            "frame_flicker": "sigma", "periodic_pattern": "amplitude_dn", "spatial_correlation": "a",
-            "nonlinearity": "c", "hot_pixels": "fraction"}
-    if effect in keys:
-        return abs(float(p[keys[effect]])) < 1e-9
-    if effect == "quantization":
-        return float(p["step_dn"]) <= 1.0
-    if effect == "black_level_offset":
-        return max(abs(float(x)) for x in p["offset_dn"]) < 1e-9
-    if effect == "channel_gain":
-        return max(abs(float(g) - 1) for g in p["gains"]) < 1e-9
-    return False
 
 
 class Loop:
@@ -348,7 +334,7 @@ class Loop:
             pre = [d for d in sig if d.name in dg.PRECEDENCE.get(chosen.name, ())]
             if pre:
                 chosen = max(pre, key=strength)
-            effect = dg.DIAGNOSTIC_EFFECT[chosen.name]
+            effect = effect_for(chosen.name)
             outside = [b for b in dg.NULL_NEEDS.get(chosen.name, ()) if b in unmodelled]
             if outside:
                 excluded.add(chosen.name)
@@ -365,14 +351,16 @@ class Loop:
                 res.unexplained.append({"diagnostic": chosen.name, "discrepancy": chosen.z, "reason": why})
                 continue
             tag += 1
-            ctx = {"value": chosen.value, "sim_mean": chosen.sim_mean, "seed": cfg.seed * 1000 + tag,
-                   "dark_specs": [sp for sp in self.g.specs(model, self.g.fit) if sp.kind == "dark"]}
-            if effect in ("heavy_tail_read", "spatial_correlation") and not ctx["dark_specs"]:
+            card = card_for(effect)
+            ctx = FitContext(diagnostic=chosen.name, value=chosen.value, sim_mean=chosen.sim_mean,
+                             seed=cfg.seed * 1000 + tag, simulate=simulate_capture,
+                             dark_specs=[sp for sp in self.g.specs(model, self.g.fit) if sp.kind == "dark"])
+            if card.needs_darks and not ctx.dark_specs:
                 excluded.add(chosen.name)
                 res.unexplained.append({"diagnostic": chosen.name, "discrepancy": chosen.z,
                                         "reason": "needs a dark sequence to fit"})
                 continue
-            cand = fit_effect(effect, chosen.name, self.g.fit_data, model, ctx)
+            cand = fit_effect(effect, self.g.fit_data, model, ctx)
             new_discs, _ = self.evaluate(cand, tag)
             after = next((d for d in new_discs if d.name == chosen.name), None)
             held_after = self.heldout(cand, tag, (chosen.name,))
@@ -380,10 +368,10 @@ class Loop:
             ha = held_after.get(chosen.name)
             diag_better = (hb is None or ha is None) or abs(ha.z) < abs(hb.z)
             kl_ok = held_after["kl"] <= held_before["kl"] * (1 + cfg.kl_tolerance) + 2 * held_before["kl_floor"]
-            null_fit = _null_parameters(effect, cand.effects[effect])
+            null_fit = card.is_null(cand.effects[effect])
             accepted = bool(diag_better and kl_ok and not null_fit)
             rec = {
-                "effect": effect, "parameters": {k: v for k, v in cand.effects[effect].items()},
+                "effect": effect, "parameters": cand.effects[effect].to_dict(),
                 "diagnostic": chosen.name, "discrepancy_before": chosen.z,
                 "discrepancy_after": None if after is None else after.z,
                 "p_before": chosen.p, "p_after": None if after is None else after.p,

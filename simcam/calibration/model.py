@@ -16,15 +16,21 @@ There is no second simulator: :func:`simcam.calibration.simulate.simulate_captur
 converts the model to the noise stage's composite entry
 (:func:`simcam.calibration.profile.noise_entry`, the entry written to ``profile.yaml``)
 and samples it, so the profile reproduces the bootstrap.
+
+What each effect contributes (its parameters, its terms in the closed-form marginal and in the
+read-noise bookkeeping) is on its card (:mod:`simcam.calibration.effects`); this module only
+walks the cards of the model's effects.
 """
 
 from __future__ import annotations
 
 import copy
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from math import gamma
 
 import numpy as np
+
+from .effects import CARDS, EffectCard, EffectParams, card_for
 
 PLANE_OFFSETS = ((0, 0), (0, 1), (1, 0), (1, 1))
 
@@ -37,7 +43,9 @@ class LoopModel:
     one when known, else the dark mean); ``white_dn`` ADC white level;
     ``K`` system gain (DN/e-); ``read_dn`` pixel read-noise sigma (DN, before
     quantisation); ``var_dark_dn2`` the measured temporal dark variance the read
-    noise is derived from; ``effects`` name -> parameters (physical units).
+    noise is derived from; ``effects`` name -> typed parameters (physical units,
+    :mod:`simcam.calibration.effects`; a plain mapping is read as the effect's
+    parameters), in the order they were added.
     """
 
     cfa: str | None
@@ -49,14 +57,26 @@ class LoopModel:
     black_declared: bool = True
     effects: dict = field(default_factory=dict)
 
+    def __post_init__(self) -> None:
+        self.effects = {name: _typed(name, p) for name, p in self.effects.items()}
+
     def copy(self) -> "LoopModel":
         return copy.deepcopy(self)
 
-    def with_effect(self, name: str, params: dict) -> "LoopModel":
+    def with_effect(self, name: str, params: EffectParams | Mapping) -> "LoopModel":
         m = self.copy()
-        m.effects[name] = params
+        m.effects[name] = _typed(name, params)
         m.refit_read()
         return m
+
+    def cards(self) -> list[tuple[EffectCard, EffectParams]]:
+        """(card, parameters) of the model's effects, in signal-chain order."""
+        return [(c, self.effects[name]) for name, c in CARDS.items() if name in self.effects]
+
+    def param(self, effect: str, name: str, default):
+        """Parameter ``name`` of ``effect``, or ``default`` when the model does not have the effect."""
+        p = self.effects.get(effect)
+        return default if p is None else getattr(p, name)
 
     @property
     def full_scale_dn(self) -> float:
@@ -64,30 +84,58 @@ class LoopModel:
 
     @property
     def q(self) -> float:
-        return float(self.effects.get("quantization", {}).get("step_dn", 1.0))
+        """The ADC's step (DN): the ``quantization`` effect's, else 1."""
+        return float(self.param("quantization", "step_dn", 1.0))
+
+    def other_dark_variance(self, start: float) -> float:
+        """``start`` plus the temporal dark variance (DN^2) the model's effects add besides the read
+        noise (:meth:`EffectCard.dark_variance_dn2`), summed in signal-chain order."""
+        for c, p in self.cards():
+            start += c.dark_variance_dn2(p)
+        return start
 
     def refit_read(self) -> None:
         """Read variance = measured dark variance minus the modelled temporal contributions."""
-        e = self.effects
-        other = self.q ** 2 / 12.0
-        other += e.get("row_noise", {}).get("sigma_dn", 0.0) ** 2
-        if "periodic_pattern" in e:
-            other += e["periodic_pattern"]["amplitude_dn"] ** 2 / 2
+        other = self.other_dark_variance(self.q ** 2 / 12.0)
         self.read_dn = float(np.sqrt(max(self.var_dark_dn2 - other, 0.01)))
 
+    def set_dark_variance_from_read(self) -> None:
+        """The dark variance the model implies (read noise, quantisation, the effects' temporal terms):
+        the inverse of :meth:`refit_read`, for a model read from a file."""
+        self.var_dark_dn2 = self.other_dark_variance(self.read_dn ** 2 + self.q ** 2 / 12)
+
     def gains(self) -> np.ndarray:
-        return np.asarray(self.effects.get("channel_gain", {}).get("gains", [1.0] * 4), dtype=np.float64)
+        """Per-site gain after photon counting (the ``channel_gain`` effect's, else 1)."""
+        return np.asarray(self.param("channel_gain", "gains", [1.0] * 4), dtype=np.float64)
+
+    def black_offset_dn(self) -> np.ndarray:
+        """Per-site offset of the dark level from ``black_dn`` (the ``black_level_offset`` effect's, else 0)."""
+        return np.asarray(self.param("black_level_offset", "offset_dn", [0.0] * 4))
 
     def to_dict(self) -> dict:
         return {
             "cfa": self.cfa, "black_dn": np.asarray(self.black_dn).tolist(), "white_dn": float(self.white_dn),
             "K_dn_per_e": float(self.K), "read_dn": float(self.read_dn),
-            "black_declared": bool(self.black_declared), "effects": _plain(self.effects),
+            "black_declared": bool(self.black_declared),
+            "effects": _plain({k: p.to_dict() for k, p in self.effects.items()}),
         }
 
 
+def _typed(name: str, params: EffectParams | Mapping) -> EffectParams:
+    """``params`` as effect ``name``'s typed parameters (a mapping is converted by its card)."""
+    want = card_for(name).params
+    if isinstance(params, want):
+        return params
+    if isinstance(params, EffectParams) or not isinstance(params, Mapping):
+        raise TypeError(f"{name}: parameters {type(params).__name__}; expected {want.__name__} or a mapping of its fields")
+    try:
+        return want.from_dict(params)
+    except ValueError as exc:
+        raise ValueError(f"{name}: {exc}") from None
+
+
 def _plain(v):
-    if isinstance(v, dict):
+    if isinstance(v, Mapping):
         return {k: _plain(x) for k, x in v.items()}
     if isinstance(v, (list, tuple, np.ndarray)):
         return [_plain(x) for x in np.asarray(v).tolist()] if isinstance(v, np.ndarray) else [_plain(x) for x in v]
@@ -116,47 +164,32 @@ def site_map(values, shape) -> np.ndarray:
     return out
 
 
-def tukey_var(lam: float) -> float:
-    """Variance of the standard Tukey-lambda distribution (finite for lam > -1/2)."""
-    if abs(lam) < 1e-9:
-        return np.pi ** 2 / 3
-    return 2.0 / lam ** 2 * (1.0 / (1 + 2 * lam) - gamma(lam + 1) ** 2 / gamma(2 * lam + 2))
-
-
 def linear_signal(model: LoopModel, signal_dn: np.ndarray) -> np.ndarray:
-    """Expected signal before the response (DN above black) whose response is ``signal_dn`` (as measured),
-    i.e. the inverse of the noise stage's ``nonlinearity`` (``strength = -c``) in DN."""
+    """Expected signal before the response (DN above black) whose response is ``signal_dn`` (as measured):
+    each effect's inverse (:meth:`EffectCard.linear_signal`; the ``nonlinearity``'s is the noise stage's
+    inverse with ``strength = -c``), from the end of the signal chain back."""
     y = np.maximum(np.asarray(signal_dn, dtype=np.float64), 0.0)
-    c = model.effects.get("nonlinearity", {}).get("c", 0.0)
-    if not c:
-        return y
-    from ..noise.effects.response import Nonlinearity
-
-    s = model.full_scale_dn
-    return Nonlinearity(strength=float(np.clip(-c, -0.45, 0.45))).inverse(y / s) * s
+    for c, p in reversed(model.cards()):
+        y = c.linear_signal(p, y, model)
+    return y
 
 
 def marginal_variance(model: LoopModel, signal_dn: np.ndarray, *, fixed_in_clean: bool = False) -> np.ndarray | None:
     """Per-pixel variance (DN^2) of the model's marginal about the plane mean, or None
-    when the marginal is not Gaussian (heavy-tailed read noise, hot pixels)."""
-    e = model.effects
-    if "heavy_tail_read" in e or "hot_pixels" in e:
+    when the marginal is not Gaussian (heavy-tailed read noise, hot pixels).
+
+    The base's ``K g_c x + read^2`` (x the linear signal, g_c the site's gain), then each effect's
+    term (:meth:`EffectCard.marginal`) in ascending ``marginal_rank``: temporal and signal terms
+    before the response, the response's squared slope (delta method), offsets after it; fixed
+    patterns left out when ``fixed_in_clean``; the ADC's ``q^2 / 12`` last."""
+    present = model.cards()
+    if not all(c.gaussian for c, _ in present):
         return None
     shape = signal_dn.shape
-    s = model.full_scale_dn
-    c = e.get("nonlinearity", {}).get("c", 0.0)
     lin = linear_signal(model, signal_dn)
     kg = model.K * site_map(model.gains(), shape)
     v = kg * lin + model.read_dn ** 2
-    v = v + e.get("row_noise", {}).get("sigma_dn", 0.0) ** 2
-    if "periodic_pattern" in e:
-        v = v + e["periodic_pattern"]["amplitude_dn"] ** 2 / 2
-    if "frame_flicker" in e:
-        v = v + (e["frame_flicker"]["sigma"] * lin) ** 2
-    if not fixed_in_clean and "prnu" in e:
-        v = v + (e["prnu"]["sigma"] * lin) ** 2
-    if c:  # the response acts on the noisy value: variance times its squared slope (delta method)
-        v = v * (1 + 2 * c * lin / s) ** 2
-    if not fixed_in_clean:  # offsets come after the response
-        v = v + e.get("dsnu", {}).get("sigma_dn", 0.0) ** 2 + e.get("column_fpn", {}).get("sigma_dn", 0.0) ** 2
+    terms = [(c, p) for c, p in present if c.marginal_rank is not None and not (fixed_in_clean and c.fixed_pattern)]
+    for c, p in sorted(terms, key=lambda cp: cp[0].marginal_rank):
+        v = c.marginal(p, v, lin, model)
     return v + model.q ** 2 / 12.0

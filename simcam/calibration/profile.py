@@ -2,19 +2,19 @@
 
 Each ISO becomes a ``composite`` entry: a ``poisson_gaussian`` base on normalised raw
 (beta1 = K / (white - black), beta2 = read^2 / (white - black)^2, Abdelhamed, PhD dissertation, York University,
-2020, eq. 3.6) and the effects
-in the noise stage's parameterisation (normalised raw offsets, dimensionless gains), in signal-chain
-order: signal effects (prnu, frame_flicker), then readout effects: heavy-tailed read noise,
-crosstalk (on shot + read noise), row and periodic noise, the response (nonlinearity, on the noisy
-value), fixed offsets, quantisation last.
+2020, eq. 3.6) and the effects in the noise stage's parameterisation (normalised raw offsets,
+dimensionless gains), in signal-chain order, the order of the registry
+(:data:`simcam.calibration.effects.CARDS`): signal effects (prnu, frame_flicker), then readout
+effects: heavy-tailed read noise, crosstalk (on shot + read noise), row and periodic noise, the
+response (nonlinearity, on the noisy value), fixed offsets, quantisation last.
 
 The same entry is what the loop's bootstrap samples (:mod:`simcam.calibration.simulate`), so the
-noise stage given ``profile.yaml`` draws the noise the loop fitted. Conversions:
+noise stage given ``profile.yaml`` draws the noise the loop fitted. Each effect's conversion, in
+both directions, is on its card (``EffectCard.to_profile`` / ``from_profile``, the card's module
+docstring says what it writes); the ones that are not one-to-one:
 
 * ``heavy_tail_read``: the read noise *is* Tukey-lambda with the read variance: beta2 = 0 and
   ``scale = read / sqrt(var(TukeyLambda(lam)))``.
-* ``spatial_correlation``: the loop's ``a`` is the noise stage's ``coefficient`` (same kernel).
-* ``nonlinearity``: ``strength = -c`` (``y = x + c x^2 / (white - black)`` in DN).
 * ``hot_pixels``: the loop's log-normal fit (``log_mean``, ``log_sigma`` of the offsets in DN) is the
   noise stage's ``hot_offset`` = its mean exp(log_mean + log_sigma^2 / 2) / (white - black) and
   ``hot_log_sigma`` = log_sigma (the same log-normal).
@@ -30,60 +30,25 @@ from pathlib import Path
 import numpy as np
 
 from ..noise.poisson_gaussian import LAMBDA_MAX
-from .model import LoopModel, tukey_var
-
-SIGNAL_ORDER = ("prnu", "channel_gain", "frame_flicker")
-READOUT_ORDER = ("heavy_tail_read", "spatial_correlation", "row_noise", "periodic_pattern", "nonlinearity",
-                 "column_fpn", "dsnu", "hot_pixels", "black_level_offset", "quantization")
+from .effects import CARDS
+from .model import LoopModel
 
 
 def noise_entry(model: LoopModel) -> tuple[dict, list[str]]:
     """(composite model entry for the noise stage, notes on approximations)."""
     fs = model.full_scale_dn
-    e = model.effects
     notes = []
     beta1 = float(model.K / fs)
     beta2 = float(model.read_dn ** 2 / fs ** 2)
     effects = []
-    for name in SIGNAL_ORDER:
-        if name not in e:
-            continue
-        p = e[name]
-        if name == "prnu":
-            effects.append({"type": "prnu", "sigma": float(p["sigma"])})
-        elif name == "channel_gain":  # a gain after photon counting: per-site beta1 (var / mean changes)
-            beta1 = [float(model.K * g / fs) for g in p["gains"]]
-        elif name == "frame_flicker":
-            effects.append({"type": "frame_flicker", "sigma": float(p["sigma"])})
-    for name in READOUT_ORDER:
-        if name not in e:
-            continue
-        p = e[name]
-        if name == "spatial_correlation":
-            effects.append({"type": "spatial_correlation", "coefficient": float(p["a"])})
-        elif name == "nonlinearity":
-            effects.append({"type": "nonlinearity", "strength": float(np.clip(-p["c"], -0.45, 0.45))})
-        elif name == "heavy_tail_read":
-            scale = model.read_dn / np.sqrt(tukey_var(p["lam"])) / fs
-            effects.append({"type": "heavy_tail_read", "lam": float(p["lam"]), "scale": float(scale)})
-            beta2 = 0.0
-        elif name == "row_noise":
-            effects.append({"type": "row_noise", "sigma": float(p["sigma_dn"] / fs)})
-        elif name == "periodic_pattern":
-            effects.append({"type": "periodic_pattern", "amplitude": float(p["amplitude_dn"] / fs),
-                            "period_px": float(p["period_px"]),
-                            "axis": "rows" if p.get("axis", "row") == "row" else "columns", "random_phase": True})
-        elif name in ("column_fpn", "dsnu"):
-            effects.append({"type": name, "sigma": float(p["sigma_dn"] / fs)})
-        elif name == "hot_pixels":
-            mean = float(np.exp(p["log_mean"] + p["log_sigma"] ** 2 / 2))
-            effects.append({"type": "hot_pixels", "hot_fraction": float(p["fraction"]), "hot_offset": mean / fs,
-                            "hot_log_sigma": float(p["log_sigma"])})
-        elif name == "black_level_offset":
-            effects.append({"type": "black_level_offset", "offset": [float(x) / fs for x in p["offset_dn"]]})
-        elif name == "quantization":
-            effects.append({"type": "quantization", "range_dn": float(fs), "step_dn": float(p["step_dn"]),
-                            "offset_dn": float(np.mean(model.black_dn))})
+    for card, p in model.cards():
+        term = card.to_profile(p, model)
+        if term.beta1 is not None:
+            beta1 = term.beta1
+        if term.beta2 is not None:
+            beta2 = term.beta2
+        if term.effect is not None:
+            effects.append(term.effect)
     base = {"type": "poisson_gaussian", "beta1": beta1, "beta2": beta2}
     if float(np.min(beta1)) * LAMBDA_MAX <= 1.0:  # no shot noise measured, or > 2^22 e- at white: Gaussian NLF
         base = {"type": "nlf", "beta1": beta1, "beta2": beta2}
@@ -143,39 +108,18 @@ def models_from_noise_profile(doc: dict, where: str) -> dict[int, LoopModel]:
         b1 = float(np.mean(b1_sites))
         b2 = float(np.mean(base["beta2"]))
         effects: dict = {}
-        if np.ptp(b1_sites) > 0:
-            effects["channel_gain"] = {"gains": [float(x) for x in b1_sites / b1]}
+        for card in CARDS.values():  # effects carried by the base (a per-site beta1: channel_gain)
+            p = card.from_base(b1_sites)
+            if p is not None:
+                effects[card.name] = p
         read = np.sqrt(b2) * fs
         for eff in m.get("effects", []) if m.get("type") == "composite" else []:
-            t = eff["type"]
-            if t == "prnu" or t == "frame_flicker":
-                effects[t] = {"sigma": float(eff["sigma"])}
-            elif t == "channel_gain":
-                effects[t] = {"gains": list(np.broadcast_to(np.asarray(eff["gain"], float), (4,)))}
-            elif t == "nonlinearity":
-                effects[t] = {"c": -float(eff["strength"])}
-            elif t == "spatial_correlation":
-                effects[t] = {"a": float(eff["coefficient"])}
-            elif t == "heavy_tail_read":
-                effects[t] = {"lam": float(eff["lam"])}
-                read = float(np.sqrt(read ** 2 + (eff["scale"] * fs) ** 2 * tukey_var(eff["lam"])))
-            elif t in ("row_noise", "column_fpn", "dsnu"):
-                effects[t] = {"sigma_dn": float(eff["sigma"]) * fs}
-            elif t == "periodic_pattern":
-                effects[t] = {"amplitude_dn": float(eff["amplitude"]) * fs, "period_px": float(eff["period_px"]),
-                              "axis": "row" if eff.get("axis", "rows") == "rows" else "col"}
-            elif t == "hot_pixels":
-                ls = float(eff.get("hot_log_sigma", 0.0))
-                effects[t] = {"fraction": float(eff.get("hot_fraction", 0.0)),
-                              "log_mean": float(np.log(max(eff.get("hot_offset", 0.05) * fs, 1e-6)) - ls * ls / 2),
-                              "log_sigma": ls}
-            elif t == "black_level_offset":
-                effects[t] = {"offset_dn": list(np.broadcast_to(np.asarray(eff["offset"], float) * fs, (4,)))}
-            elif t == "quantization":
-                effects[t] = {"step_dn": float(eff.get("step_dn", 1.0))}
+            card = CARDS.get(eff["type"])
+            if card is None:  # an effect of the noise stage outside the loop's vocabulary
+                continue
+            effects[card.name] = card.from_profile(eff, fs)
+            read = card.profile_read_dn(eff, fs, read)
         lm = LoopModel(cam.get("cfa"), np.full((2, 2), black), white, b1 * fs, float(read), 0.0, effects=effects)
-        q = lm.q
-        lm.var_dark_dn2 = lm.read_dn ** 2 + q ** 2 / 12 + effects.get("row_noise", {}).get("sigma_dn", 0.0) ** 2 + \
-            (effects["periodic_pattern"]["amplitude_dn"] ** 2 / 2 if "periodic_pattern" in effects else 0.0)
+        lm.set_dark_variance_from_read()
         out[int(round(float(ent["iso"])))] = lm
     return out

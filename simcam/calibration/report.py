@@ -10,15 +10,16 @@ import base64
 import html
 import io
 import json
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import ProfileError
 from . import diagnostics as dg
-from .heldout import KL_BINNING, KL_EDGES
-from .effects import ctx_like
-from .heldout import FAMILIES, GATE_Z, STRUCTURED_BINNING
+from .effects import DIAGNOSTIC_EFFECT, card_for
+from .effects.card import format_number as _num
+from .heldout import FAMILIES, GATE_Z, KL_BINNING, KL_EDGES, STRUCTURED_BINNING
 from .loop import GroupResult, LoopConfig
 from .model import LoopModel
 from .simulate import simulate_capture
@@ -38,12 +39,12 @@ def iso_label(iso: int) -> str:
 
 
 def _disc_dict(d: dg.Discrepancy) -> dict:
-    return {"name": d.name, "effect": dg.DIAGNOSTIC_EFFECT[d.name], "value": d.value, "sim_mean": d.sim_mean,
+    return {"name": d.name, "effect": DIAGNOSTIC_EFFECT[d.name], "value": d.value, "sim_mean": d.sim_mean,
             "sim_sd": d.sim_sd, "discrepancy": d.z, "p": d.p, "significant": bool(d.significant)}
 
 
 def _clean(v):
-    if isinstance(v, dict):
+    if isinstance(v, Mapping):
         return {str(k): _clean(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
         return [_clean(x) for x in v]
@@ -179,7 +180,7 @@ def loop_model_dict(results: list[GroupResult], capture, camera_id: str | None =
             "model": {"type": "poisson_gaussian", "beta1": float(m.K / fs), "beta2": float(m.read_dn ** 2 / fs ** 2)},
             "K_dn_per_e": float(m.K), "read_dn": float(m.read_dn),
             "black_level": [float(x) for x in np.asarray(m.black_dn).ravel()],
-            "effects": _clean({k: {p: v for p, v in prm.items()} for k, prm in m.effects.items()}),
+            "effects": _clean({k: prm.to_dict() for k, prm in m.effects.items()}),
         })
     return {
         "schema_version": PROFILE_SCHEMA,
@@ -226,10 +227,11 @@ def read_start_profile(path: Path) -> dict[int, LoopModel]:
         except (KeyError, TypeError, ValueError) as exc:
             raise ProfileError(f"{path}: isos[{i}]: missing or invalid field ({exc}); expected iso, K_dn_per_e, "
                                "read_dn, black_level, effects") from None
-        m = LoopModel(doc.get("cfa"), black, white, K, read, var_dark_dn2=0.0, effects=effects)
-        q = m.q
-        m.var_dark_dn2 = read ** 2 + q ** 2 / 12 + effects.get("row_noise", {}).get("sigma_dn", 0.0) ** 2 + \
-            (effects["periodic_pattern"]["amplitude_dn"] ** 2 / 2 if "periodic_pattern" in effects else 0.0)
+        try:
+            m = LoopModel(doc.get("cfa"), black, white, K, read, var_dark_dn2=0.0, effects=effects)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ProfileError(f"{path}: isos[{i}].effects: {exc.args[0] if exc.args else exc}") from None
+        m.set_dark_variance_from_read()
         out[int(e["iso"])] = m
     return out
 
@@ -247,7 +249,7 @@ def _png(fig) -> str:
 
 def _ptc_curve(model: LoopModel, y: np.ndarray, plane: int) -> np.ndarray:
     s = model.full_scale_dn
-    c = model.effects.get("nonlinearity", {}).get("c", 0.0)
+    c = model.param("nonlinearity", "c", 0.0)
     x = y if abs(c) < 1e-12 else (np.sqrt(np.maximum(1 + 4 * c * y / s, 0)) - 1) * s / (2 * c)
     v = model.K * model.gains()[plane] * x + model.var_dark_dn2
     return v * (1 + 2 * c * x / s) ** 2
@@ -297,7 +299,7 @@ def figures(r: GroupResult, seed: int = 0) -> dict[str, str]:
         acc = {2: [], 1: []}
         for rep in range(4):
             sims = simulate_capture(model, specs, np.random.default_rng([seed, 99, rep]))
-            cd = ctx_like(d, sims, specs)
+            cd = d.like(sims, specs)
             for axis in (2, 1):
                 acc[axis].append(dg.periodogram(cd, axis))
         model_ps[key] = acc
@@ -375,32 +377,9 @@ def _fmt(v):
     return html.escape(str(v))
 
 
-#: unit and display scale of each effect parameter (the loop's own parameterisation, DN / relative)
-PARAM_UNITS = {"sigma_dn": ("DN", 1.0), "amplitude_dn": ("DN", 1.0), "offset_dn": ("DN", 1.0), "step_dn": ("DN", 1.0),
-               "period_px": ("px", 1.0), "sigma": ("%", 100.0), "fraction": ("%", 100.0), "c": ("% at white", 100.0),
-               "a": ("", 1.0), "lam": ("", 1.0), "gains": ("×", 1.0), "log_mean": ("ln DN", 1.0),
-               "log_sigma": ("ln DN", 1.0), "axis": ("", None)}
-
-
-def _num(v: float, digits: int = 3) -> str:
-    """``digits`` significant digits (``g`` format: an exponent only below 1e-4 or beyond the digits)."""
-    if v is None:
-        return "–"
-    return f"{float(v):.{digits}g}"
-
-
-def format_parameters(params: dict) -> str:
-    """Effect parameters with their units, e.g. ``sigma_dn = 2.66 DN``."""
-    out = []
-    for k, v in params.items():
-        unit, scale = PARAM_UNITS.get(k, ("", 1.0))
-        if scale is None or isinstance(v, str):
-            out.append(f"{k} = {v}")
-        elif isinstance(v, (list, tuple)):
-            out.append(f"{k} = [{', '.join(_num(x * scale) for x in v)}] {unit}".rstrip())
-        else:
-            out.append(f"{k} = {_num(v * scale)} {unit}".rstrip())
-    return "; ".join(out)
+def format_parameters(effect: str, params: Mapping) -> str:
+    """Parameters of ``effect`` with their units, e.g. ``sigma_dn = 2.66 DN`` (the effect's card formats them)."""
+    return card_for(effect).format(params)
 
 
 def _model_table(g: dict) -> str:
@@ -412,7 +391,7 @@ def _model_table(g: dict) -> str:
         K = m["K_dn_per_e"]
         read_e = m["read_dn"] / K if K else None
         black = np.asarray(m["black_dn"], dtype=np.float64)
-        eff = "; ".join(f"<b>{html.escape(k)}</b>: {html.escape(format_parameters(v))}" for k, v in m["effects"].items())
+        eff = "; ".join(f"<b>{html.escape(k)}</b>: {html.escape(format_parameters(k, v))}" for k, v in m["effects"].items())
         rows.append(f"<tr><td class=l>{'base fit' if name == 'base_model' else 'final'}</td>"
                     f"<td>{_num(K, 4) if K else '– (no signal)'}</td><td>{_num(m['read_dn'], 4)}</td><td>{_num(read_e, 4)}</td>"
                     f"<td>{_num(float(black.mean()), 5)}</td><td>{_num(m['white_dn'], 5)}</td>"
@@ -640,7 +619,7 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
                          f"<td>{_fmt(h['kl_structured_before'])}</td><td>{_fmt(h['kl_structured_after'])}</td>"
                          f"<td>{_fmt(h['nll_before'])}</td>"
                          f"<td>{_fmt(h['nll_after'])}</td><td>{'yes' if it['accepted'] else 'no'}</td>"
-                         f"<td class=l>{html.escape(format_parameters(it['parameters']))}</td></tr>")
+                         f"<td class=l>{html.escape(format_parameters(it['effect'], it['parameters']))}</td></tr>")
         parts.append("</table>")
         if g["unexplained"]:
             parts.append("<h3>Unexplained</h3><ul>" + "".join(

@@ -19,11 +19,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from .effects import CARDS
 from .model import LoopModel, SimSpec, linear_signal
 from .profile import noise_entry
 
-#: effects whose draw is a fixed pattern (left out when the clean reference already holds it).
-FIXED_EFFECTS = ("dsnu", "column_fpn", "prnu", "hot_pixels")
+#: effects whose draw is a fixed pattern (left out when the clean reference already holds it): the cards'
+#: ``fixed_pattern`` (an effect's name is its type in the composite entry).
+FIXED_EFFECTS = tuple(name for name, card in CARDS.items() if card.fixed_pattern)
 
 
 def composite_entry(model: LoopModel) -> dict:

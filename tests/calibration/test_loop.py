@@ -39,9 +39,9 @@ def test_fitted_parameters_match_the_hidden_ones():
     # row_noise sigma 1.5 DN: SE of the row-mean variance estimate over 6 frames x 64 rows x 5 seqs ~ 4 %
     r = run_case(("row_noise", "dsnu"))
     assert set(r.model.effects) == {"row_noise", "dsnu"}
-    assert r.model.effects["row_noise"]["sigma_dn"] == pytest.approx(1.5, rel=0.15)
+    assert r.model.effects["row_noise"].sigma_dn == pytest.approx(1.5, rel=0.15)
     # dsnu 2.5 DN estimated from one 64x64 map (robust variance, SE ~ 3 %)
-    assert r.model.effects["dsnu"]["sigma_dn"] == pytest.approx(2.5, rel=0.15)
+    assert r.model.effects["dsnu"].sigma_dn == pytest.approx(2.5, rel=0.15)
 
 
 def test_cli_end_to_end_and_heldout_kl_drop(tmp_path):
@@ -75,7 +75,9 @@ def test_cli_end_to_end_and_heldout_kl_drop(tmp_path):
     own = yaml.safe_load((out / "loop_model.yaml").read_text())
     assert own["isos"][0]["effects"]["quantization"]["step_dn"] == 4.0
     html = (out / "report.html").read_text()
-    assert html.count("data:image/png;base64,") == 4
+    # photon transfer, spectra, maps, residual histograms, and the EMVA 1288 R4.0 plots
+    assert html.count("data:image/png;base64,") == 5
+    assert "EMVA 1288 Release 4.0" in html and "System gain K" in html
     # starting from the written model, nothing is left to add
     out2 = tmp_path / "out2"
     assert main(["loop", str(cap), "--out", str(out2), "--start-profile", str(out / "loop_model.yaml")]) == 0

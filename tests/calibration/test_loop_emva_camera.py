@@ -55,6 +55,6 @@ def test_loop_names_the_camera_maps(case):
     expected = [] if case == "base" else [case]
     assert list(r.model.effects) == expected and r.unexplained == []
     if case == "dsnu":  # 3 e- map: SE of a 4096-pixel robust spread ~2 %, plus the temporal part removed
-        assert r.model.effects["dsnu"]["sigma_dn"] == pytest.approx(3.0 * cam.K, rel=0.12)
+        assert r.model.effects["dsnu"].sigma_dn == pytest.approx(3.0 * cam.K, rel=0.12)
     if case == "prnu":
-        assert r.model.effects["prnu"]["sigma"] == pytest.approx(0.02, rel=0.15)
+        assert r.model.effects["prnu"].sigma == pytest.approx(0.02, rel=0.15)

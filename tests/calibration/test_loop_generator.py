@@ -42,7 +42,7 @@ def test_fixed_patterns_persist_across_frames():
 
 
 def test_hot_pixel_log_normal_fit_on_exponential_offsets():
-    """The loop's log-normal fit (effect_fit.fit_hot_pixels) on the generator's exponential offsets (mean
+    """The loop's log-normal fit (the hot_pixels card's fit) on the generator's exponential offsets (mean
     60 DN): it sees the offsets above its threshold t (6 robust sigma of the dark-mean map, ~8 DN here).
     Exponential, memoryless: detected fraction f exp(-t / 60), their mean t + 60 (closed forms; the map
     noise, sd ~ 1.3 DN, shifts the detected set by < 2 %). ~0.02 x 16384 x 0.87 = 290 detected pixels:
@@ -53,16 +53,16 @@ def test_hot_pixel_log_normal_fit_on_exponential_offsets():
     import pytest
 
     from simcam.calibration import diagnostics as dg
-    from simcam.calibration.effects import fit_hot_pixels
+    from simcam.calibration.effects import CARDS, FitContext
     from loop_generator import HiddenEffectSensor, SensorSpec
 
     spec = SensorSpec(height=128, width=128, effects={"hot_pixels": {"fraction": 0.02, "mean_dn": 60.0}})
     frames = HiddenEffectSensor(spec).frames(0.0, 12, np.random.default_rng(4))
     d = dg.CaptureData([frames], [], [], np.full((2, 2), spec.black_dn), spec.white_dn, spec.cfa)
-    p = fit_hot_pixels(d, None, {})
+    p = CARDS["hot_pixels"].fit(d, None, FitContext())
     m = d.dark_map()[0]
     t = 6 * dg.robust_sigma(dg.remove_profiles(m))
-    assert p["fraction"] == pytest.approx(0.02 * np.exp(-t / 60.0), rel=0.15)
-    assert np.exp(p["log_mean"] + p["log_sigma"] ** 2 / 2) == pytest.approx(t + 60.0, rel=0.2)
+    assert p.fraction == pytest.approx(0.02 * np.exp(-t / 60.0), rel=0.15)
+    assert np.exp(p.log_mean + p.log_sigma ** 2 / 2) == pytest.approx(t + 60.0, rel=0.2)
     # log sd of an exponential above t: ~1.1 for t / 60 ~ 0.13 (Var log X = pi^2 / 6 untruncated)
-    assert 0.7 < p["log_sigma"] < 1.3
+    assert 0.7 < p.log_sigma < 1.3

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from simcam.calibration.effects.hot_pixels import HotPixels
 from simcam.calibration.model import LoopModel
 from simcam.calibration.profile import models_from_noise_profile, noise_entry, noise_profile
 
@@ -33,10 +34,10 @@ def test_round_trip_through_noise_profile():
     back = models_from_noise_profile(doc, "profile.yaml")[800]
     assert back.K == pytest.approx(m.K) and back.read_dn == pytest.approx(m.read_dn)
     assert set(back.effects) == set(m.effects)
-    assert back.effects["dsnu"]["sigma_dn"] == pytest.approx(2.0)
-    assert back.effects["spatial_correlation"]["a"] == pytest.approx(0.2, rel=1e-6)
-    assert back.effects["nonlinearity"]["c"] == pytest.approx(-0.1)
-    assert back.effects["channel_gain"]["gains"] == pytest.approx([1.1, 1.0, 1.0, 0.9])
+    assert back.effects["dsnu"].sigma_dn == pytest.approx(2.0)
+    assert back.effects["spatial_correlation"].a == pytest.approx(0.2, rel=1e-6)
+    assert back.effects["nonlinearity"].c == pytest.approx(-0.1)
+    assert back.effects["channel_gain"].gains == pytest.approx([1.1, 1.0, 1.0, 0.9])
     # beta1 on normalised raw = K g_c / (white - black), per site
     entry, _ = noise_entry(m)
     assert entry["base"]["beta1"] == pytest.approx([2.2 / 959.0, 2.0 / 959.0, 2.0 / 959.0, 1.8 / 959.0])
@@ -81,11 +82,11 @@ def test_hot_pixel_log_normal_round_trip():
     # the loop's log-normal (log_mean, log_sigma in DN) -> hot_offset = its mean / (white - black) and
     # hot_log_sigma, and back (exact inverse)
     m = _model()
-    m.effects["hot_pixels"] = {"fraction": 0.004, "log_mean": 3.9, "log_sigma": 0.75}
+    m.effects["hot_pixels"] = HotPixels(fraction=0.004, log_mean=3.9, log_sigma=0.75)
     entry, notes = noise_entry(m)
     hp = next(e for e in entry["effects"] if e["type"] == "hot_pixels")
     assert hp["hot_offset"] == pytest.approx(np.exp(3.9 + 0.75 ** 2 / 2) / 959.0)
     assert hp["hot_log_sigma"] == 0.75 and not any("hot" in n for n in notes)
     back = models_from_noise_profile(noise_profile([_Res(m)], _Cap()), "profile.yaml")[800]
-    assert back.effects["hot_pixels"]["log_mean"] == pytest.approx(3.9)
-    assert back.effects["hot_pixels"]["log_sigma"] == pytest.approx(0.75)
+    assert back.effects["hot_pixels"].log_mean == pytest.approx(3.9)
+    assert back.effects["hot_pixels"].log_sigma == pytest.approx(0.75)

@@ -1,0 +1,74 @@
+"""The calibration loop's effect vocabulary: one card per effect (:mod:`.card`), listed here.
+
+Each module of this package holds one effect: its typed parameters, its card (fit, diagnostics that
+propose it, marginal variance and read-noise bookkeeping, profile conversion, report formatting)
+and its physics with the sources. :data:`CARDS` below is the registry, the only list of the effects;
+the loop, the model, the profile conversion and the report all go through it.
+
+To add an effect: write its module (parameters, card, docstring), add its card to :data:`CARDS`
+at its place in the signal chain, and give it an example in
+``tests/calibration/test_effect_cards.py``.
+"""
+
+from __future__ import annotations
+
+from .. import diagnostics as _dg
+from . import (black_level_offset, channel_gain, column_fpn, dsnu, frame_flicker, heavy_tail_read, hot_pixels,
+               nonlinearity, periodic_pattern, prnu, quantization, row_noise, spatial_correlation)
+from .card import EffectCard, EffectParams, Fit, FitContext, ProfileTerm
+
+__all__ = ["CARDS", "DIAGNOSTIC_EFFECT", "EffectCard", "EffectParams", "Fit", "FitContext", "ProfileTerm",
+           "card_for", "effect_for", "params_from_dict"]
+
+#: name -> card, in signal-chain order (the order of the noise stage's composite entry): effects on
+#: the signal (before photon counting / the gain), then readout effects, the response, fixed offsets,
+#: and the quantisation last.
+CARDS: dict[str, EffectCard] = {c.name: c for c in (
+    prnu.PrnuCard(),
+    channel_gain.ChannelGainCard(),
+    frame_flicker.FrameFlickerCard(),
+    heavy_tail_read.HeavyTailReadCard(),
+    spatial_correlation.SpatialCorrelationCard(),
+    row_noise.RowNoiseCard(),
+    periodic_pattern.PeriodicPatternCard(),
+    nonlinearity.NonlinearityCard(),
+    column_fpn.ColumnFpnCard(),
+    dsnu.DsnuCard(),
+    hot_pixels.HotPixelsCard(),
+    black_level_offset.BlackLevelOffsetCard(),
+    quantization.QuantizationCard(),
+)}
+
+
+def _diagnostic_effect() -> dict[str, str | None]:
+    out: dict[str, str | None] = {name: None for name in _dg.DIAGNOSTICS}
+    for c in CARDS.values():
+        for name in c.diagnostics:
+            if name not in out:
+                raise ValueError(f"effect card {c.name}: diagnostic {name!r} is not in the residual battery")
+            if out[name] is not None:
+                raise ValueError(f"diagnostic {name!r} proposes both {out[name]} and {c.name}")
+            out[name] = c.name
+    return out
+
+
+#: diagnostic -> the effect it proposes (from the cards' ``diagnostics``); None: no effect of the vocabulary
+DIAGNOSTIC_EFFECT: dict[str, str | None] = _diagnostic_effect()
+
+
+def card_for(name: str) -> EffectCard:
+    """The card of effect ``name``; KeyError naming the vocabulary when there is none."""
+    try:
+        return CARDS[name]
+    except KeyError:
+        raise KeyError(f"unknown effect {name!r}; the loop's effects are {', '.join(CARDS)}") from None
+
+
+def effect_for(diagnostic: str) -> str | None:
+    """The effect a significant ``diagnostic`` proposes (None: no effect of the vocabulary explains it)."""
+    return DIAGNOSTIC_EFFECT[diagnostic]
+
+
+def params_from_dict(name: str, values) -> EffectParams:
+    """Typed parameters of effect ``name`` from a mapping of its fields (loop_model.yaml, report.json)."""
+    return card_for(name).params.from_dict(values)

@@ -1,0 +1,252 @@
+"""The effect card: what the calibration loop knows about one effect of its vocabulary.
+
+A card (a subclass of :class:`EffectCard`, one instance in the registry) holds for one effect:
+
+* ``name``: the effect's name in the loop, in ``loop_model.yaml`` and ``report.json``; it is also
+  the ``type`` of the effect's entry in the noise stage's composite model (``profile.yaml``);
+* ``params``: its typed parameters, a frozen dataclass derived from :class:`EffectParams` with
+  the unit of each field in the field's doc (``quantity``);
+* ``diagnostics``: the residual diagnostics (:mod:`simcam.calibration.diagnostics`) that propose it;
+* :meth:`EffectCard.fit`: the fit of its parameters on a capture (moments, or indirect inference
+  through ``FitContext.simulate``);
+* its part of the closed-form marginal variance (:meth:`EffectCard.marginal`, ``marginal_rank``,
+  ``gaussian``, ``fixed_pattern``) and of the read-noise bookkeeping
+  (:meth:`EffectCard.dark_variance_dn2`: what ``LoopModel.refit_read`` takes off the measured dark
+  variance to leave the read noise);
+* its conversion to and from the noise stage's profile entry (:meth:`EffectCard.to_profile`,
+  :meth:`EffectCard.from_profile`, :meth:`EffectCard.from_base`, :meth:`EffectCard.profile_read_dn`);
+* its formatting for the report (:meth:`EffectCard.format`) and when a fit is the identity
+  (:meth:`EffectCard.is_null`);
+* in its module docstring, the physics, with the sources.
+
+The registry (:mod:`simcam.calibration.effects`, the package's ``__init__``) lists the cards in one
+place, in signal-chain order; this module imports none of them. Cards see the loop's model
+(``LoopModel``) only through its attributes, so ``model`` imports the registry and not the reverse.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import MISSING, dataclass, field, fields
+from typing import Any, ClassVar
+
+import numpy as np
+
+
+def quantity(unit: str, doc: str, *, scale: float | None = 1.0, default: Any = MISSING):
+    """A parameter field: ``doc`` says what it is, ``unit`` is the unit the report shows it in and
+    ``scale`` the factor from the stored value to that unit (None: shown as it is, e.g. a name)."""
+    meta = {"unit": unit, "scale": scale, "doc": doc}
+    return field(metadata=meta) if default is MISSING else field(default=default, metadata=meta)
+
+
+def format_number(v: float | None, digits: int = 3) -> str:
+    """``digits`` significant digits (``g`` format: an exponent only below 1e-4 or beyond the digits)."""
+    if v is None:
+        return "–"
+    return f"{float(v):.{digits}g}"
+
+
+class EffectParams(Mapping):
+    """Typed parameters of one effect (subclasses are frozen dataclasses; units in the field docs).
+
+    They also read as a mapping field -> value (optional fields that are None left out), the
+    loop's former dicts: :meth:`to_dict` is what ``loop_model.yaml`` and ``report.json`` hold.
+    """
+
+    @classmethod
+    def from_dict(cls, values: Mapping) -> EffectParams:
+        """The parameters from a mapping of field names (``loop_model.yaml``, ``report.json``);
+        values are taken as they are. ValueError on an unknown or a missing field."""
+        names = [f.name for f in fields(cls)]
+        unknown = [k for k in values if k not in names]
+        missing = [f.name for f in fields(cls) if f.default is MISSING and f.name not in values]
+        if unknown or missing:
+            raise ValueError(", ".join(
+                ([f"unknown parameter(s) {', '.join(map(str, unknown))}"] if unknown else [])
+                + ([f"missing parameter(s) {', '.join(missing)}"] if missing else []))
+                + f"; expected {', '.join(names)}")
+        return cls(**values)
+
+    def to_dict(self) -> dict:
+        """Field -> value, in field order (optional fields that are None left out)."""
+        return {k: getattr(self, k) for k in self}
+
+    def __iter__(self) -> Iterator[str]:
+        for f in fields(self):
+            if not (f.default is None and getattr(self, f.name) is None):
+                yield f.name
+
+    def __len__(self) -> int:
+        return sum(1 for _ in self)
+
+    def __getitem__(self, key: str):
+        if key in list(self):
+            return getattr(self, key)
+        raise KeyError(key)
+
+    def format(self) -> str:
+        """Parameters with their units, e.g. ``sigma_dn = 2.66 DN`` (three significant digits)."""
+        out = []
+        for f in fields(self):
+            if f.name not in self:
+                continue
+            v = getattr(self, f.name)
+            unit, scale = f.metadata.get("unit", ""), f.metadata.get("scale", 1.0)
+            if scale is None or isinstance(v, str):
+                out.append(f"{f.name} = {v}")
+            elif isinstance(v, (list, tuple)):
+                out.append(f"{f.name} = [{', '.join(format_number(x * scale) for x in v)}] {unit}".rstrip())
+            else:
+                out.append(f"{f.name} = {format_number(v * scale)} {unit}".rstrip())
+        return "; ".join(out)
+
+
+@dataclass(frozen=True)
+class Fit:
+    """A fit that also re-estimates the system gain K (DN/e-) with the effect's parameters."""
+
+    params: EffectParams
+    K: float
+
+
+@dataclass(frozen=True)
+class FitContext:
+    """What a card's fit may use besides the capture and the current model.
+
+    ``diagnostic``: the diagnostic that proposed the effect; ``value`` / ``sim_mean``: its value on
+    the data and its mean over the bootstrap replicates of the current model; ``seed``: the seed of
+    an indirect fit's simulations; ``dark_specs``: the dark sequences as
+    :class:`~simcam.calibration.model.SimSpec`; ``simulate``: the loop's bootstrap,
+    :func:`simcam.calibration.simulate.simulate_capture` (passed in: the cards sit below the
+    simulator, which converts models through them).
+    """
+
+    diagnostic: str = ""
+    value: float = math.nan
+    sim_mean: float = math.nan
+    seed: int = 0
+    dark_specs: Sequence = ()
+    simulate: Callable | None = None
+
+
+@dataclass(frozen=True)
+class ProfileTerm:
+    """What one effect contributes to the noise stage's composite entry: ``effect``, its entry in
+    the composite's effect list (None: none); ``beta1`` / ``beta2``, values that replace the
+    Poisson-Gaussian base's (normalised raw; None: unchanged)."""
+
+    effect: dict | None = None
+    beta1: list | None = None
+    beta2: float | None = None
+
+
+class EffectCard:
+    """One effect of the calibration loop's vocabulary (module docstring). Subclasses set the class
+    attributes and override the methods their effect needs; the defaults are "no contribution"."""
+
+    #: the effect's name (and the noise stage's effect ``type``)
+    name: ClassVar[str]
+    #: its typed parameters
+    params: ClassVar[type[EffectParams]]
+    #: residual diagnostics that propose it
+    diagnostics: ClassVar[tuple[str, ...]] = ()
+    #: a pattern drawn once per sensor: not drawn again (nor in the marginal variance) where a scene's
+    #: clean reference is its temporal mean, which already holds it
+    fixed_pattern: ClassVar[bool] = False
+    #: the pixel marginal stays Gaussian with it (else the model has no closed-form density)
+    gaussian: ClassVar[bool] = True
+    #: position of :meth:`marginal` in the closed-form marginal variance
+    #: (:func:`simcam.calibration.model.marginal_variance` applies the model's effects in ascending
+    #: rank to the base variance K g x + read^2; None: no term). Terms added before the response's
+    #: slope (rank 50) act on the noisy value before the response, those after it are offsets added
+    #: after it. The ranks also fix the order of the floating-point sums.
+    marginal_rank: ClassVar[int | None] = None
+    #: its fit simulates dark sequences (indirect inference): not fitted without darks
+    needs_darks: ClassVar[bool] = False
+    #: its fit depends on the rest of the model: refitted whenever another effect is added
+    refit_on_change: ClassVar[bool] = False
+    #: the parameter whose zero makes the effect the identity (:meth:`is_null`; None: no such parameter)
+    null_field: ClassVar[str | None] = None
+
+    def fit(self, d, model, ctx: FitContext) -> EffectParams | Fit:
+        """Parameters fitted on the capture ``d`` (``CaptureData``) given the current ``model``."""
+        raise NotImplementedError(f"{self.name}: no fit")
+
+    def marginal(self, p: EffectParams, v: np.ndarray, lin: np.ndarray, model) -> np.ndarray:
+        """The marginal variance (DN^2) ``v`` with this effect's term; ``lin``: the expected linear
+        signal above black (DN, before the response)."""
+        return v
+
+    def dark_variance_dn2(self, p: EffectParams) -> float:
+        """Temporal variance (DN^2) it adds to a dark pixel besides the read noise: what the read
+        noise is not (``LoopModel.refit_read``)."""
+        return 0.0
+
+    def linear_signal(self, p: EffectParams, y: np.ndarray, model) -> np.ndarray:
+        """The expected signal before this effect (DN above black) whose image through it is ``y``."""
+        return y
+
+    def to_profile(self, p: EffectParams, model) -> ProfileTerm:
+        """Its part of the noise stage's composite entry (normalised raw)."""
+        raise NotImplementedError(f"{self.name}: no profile entry")
+
+    def from_profile(self, entry: Mapping, full_scale_dn: float) -> EffectParams:
+        """Parameters from the composite's effect entry of this ``type`` (``full_scale_dn``: white - black)."""
+        raise NotImplementedError(f"{self.name}: no conversion from a profile entry")
+
+    def profile_read_dn(self, entry: Mapping, full_scale_dn: float, read_dn: float) -> float:
+        """The loop's read-noise sigma (DN) given this effect's entry and the one the base's beta2 gives."""
+        return read_dn
+
+    def from_base(self, beta1_sites: np.ndarray) -> EffectParams | None:
+        """Parameters carried by the base's per-site ``beta1`` (4 values), or None."""
+        return None
+
+    def is_null(self, p: EffectParams) -> bool:
+        """True when the fitted effect is the identity (nothing to add): its ``null_field`` is zero."""
+        return self.null_field is not None and abs(float(getattr(p, self.null_field))) < 1e-9
+
+    def format(self, p: EffectParams | Mapping) -> str:
+        """Parameters as the report shows them, with units (a mapping is read as this card's parameters)."""
+        if not isinstance(p, EffectParams):
+            p = self.params.from_dict(p)
+        return p.format()
+
+    def __repr__(self) -> str:
+        return f"<effect card {self.name}>"
+
+
+class OffsetSigmaCard(EffectCard):
+    """An effect that is a zero-mean Gaussian offset of rms ``sigma_dn`` (DN) drawn per row and frame, per
+    column or per pixel: it adds ``sigma_dn^2`` to the marginal variance, and its noise-stage entry is
+    ``{type: <name>, sigma: sigma_dn / (white - black)}`` (normalised raw)."""
+
+    null_field = "sigma_dn"
+
+    def marginal(self, p, v, lin, model):
+        return v + p.sigma_dn ** 2
+
+    def to_profile(self, p, model):
+        return ProfileTerm(effect={"type": self.name, "sigma": float(p.sigma_dn / model.full_scale_dn)})
+
+    def from_profile(self, entry, full_scale_dn):
+        return self.params(sigma_dn=float(entry["sigma"]) * full_scale_dn)
+
+
+class GainSigmaCard(EffectCard):
+    """An effect that is a zero-mean Gaussian relative gain of rms ``sigma`` (dimensionless) on the expected
+    signal, drawn per pixel or per frame: it adds ``(sigma x)^2`` to the marginal variance (x the linear
+    signal above black, DN), and its noise-stage entry is ``{type: <name>, sigma}``."""
+
+    null_field = "sigma"
+
+    def marginal(self, p, v, lin, model):
+        return v + (p.sigma * lin) ** 2
+
+    def to_profile(self, p, model):
+        return ProfileTerm(effect={"type": self.name, "sigma": float(p.sigma)})
+
+    def from_profile(self, entry, full_scale_dn):
+        return self.params(sigma=float(entry["sigma"]))

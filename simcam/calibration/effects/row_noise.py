@@ -1,0 +1,51 @@
+"""``row_noise``: a per-frame offset of each row (horizontal banding).
+
+Physics. Row-wise readout shares a reference and a clock between the pixels of a row, so each row of
+each frame gets an offset ``~ N(0, sigma^2)`` drawn anew every frame: temporal noise, the same for
+every pixel of the row (ELD, Wei et al., CVPR 2020; EMVA 1288 Release 4.0, sec. 4 and 8: the row
+component of a spatial variance; A. Abdelhamed, *Noise Modelling for Smartphone Cameras*, PhD
+dissertation, York University, 2020, ch. 2, read noise). It adds sigma^2 to every pixel's temporal
+variance, dark or lit, so the read noise is what is left of the dark variance once it (and the
+quantisation) is taken off.
+
+Fit. Variance of the row means of the temporal residual (darks, else flats) minus the pixel
+variance's share ``var / W``; a modelled row-wise periodic pattern (``periodic_pattern``, axis row),
+already part of that variance, is taken off (amplitude^2 / 2).
+
+Profile. ``{type: row_noise, sigma}`` with sigma on normalised raw, ``sigma_dn / (white - black)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .card import EffectParams, OffsetSigmaCard, quantity
+
+
+@dataclass(frozen=True)
+class RowNoise(EffectParams):
+    sigma_dn: float = quantity("DN", "rms of a row's offset in one frame (DN)")
+
+
+class RowNoiseCard(OffsetSigmaCard):
+    name = "row_noise"
+    params = RowNoise
+    diagnostics = ("row_mean_excess",)
+    marginal_rank = 10
+
+    def fit(self, d, model, ctx):
+        res = d.temporal_residuals("dark") or d.temporal_residuals("flat")
+        vals = []
+        for r in res:
+            rm = r.mean(axis=2)
+            vals.append(np.var(rm, axis=1).mean() - np.var(r) / r.shape[2])
+        s2 = float(np.mean(vals))
+        per = model.effects.get("periodic_pattern")
+        if per is not None and per.axis == "row":  # a modelled row-wise sinusoid is already part of it
+            s2 -= per.amplitude_dn ** 2 / 2
+        return RowNoise(sigma_dn=float(np.sqrt(max(s2, 0.0))))
+
+    def dark_variance_dn2(self, p):
+        return p.sigma_dn ** 2
