@@ -42,7 +42,7 @@ if __package__ in (None, ""):  # run as a script: the repository root makes ``te
 #: the loop's named effects (what it may add); anything else in a truth manifest is outside the vocabulary
 VOCABULARY = ("row_noise", "column_fpn", "dsnu", "prnu", "hot_pixels", "heavy_tail_read", "quantization",
               "spatial_correlation", "periodic_pattern", "black_level_offset", "frame_flicker", "nonlinearity",
-              "channel_gain")
+              "channel_gain", "dark_current")
 
 
 def cpu_model() -> str:

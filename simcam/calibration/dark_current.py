@@ -82,3 +82,51 @@ def dark_current(darks: list[Sequence], K: float | None) -> dict:
     if good_k:
         out["nonuniformity_e_per_s"] = out["nonuniformity_dn_per_s"] / K
     return out
+
+
+def series_fit(series: list, K: float | None) -> dict | None:
+    """Dark current of dark frame stacks at several exposure times (the loop's ``CaptureData.dark_series``).
+
+    ``series``: (exposure_s, (n, H, W) frames in DN) per dark sequence; ``K``: the system gain (DN/e-;
+    None or <= 0: taken from the darks themselves, variance slope / mean slope, the dark current
+    being Poisson). Returns None with fewer than two exposure times, else the slopes of the mean dark
+    level (DN/s) and of the temporal variance (DN^2/s) against exposure time, the gain used, the
+    mean rate (e-/s, from the mean's slope) and the spread of the per-pixel rate: the robust standard
+    deviation of the per-pixel least-squares slope of the temporal-mean images (row and column
+    profiles removed: they are not pixel dark current), its variance corrected by the temporal noise
+    the slope carries (module docstring), as a log-normal ``log_sigma`` (coefficient of variation
+    ``sqrt(exp(s^2) - 1)``).
+    """
+    from .diagnostics import remove_profiles, robust_sigma
+
+    by_t: dict[float, list] = {}
+    for t, f in series:
+        by_t.setdefault(float(t), []).append(f)
+    times = sorted(by_t)
+    if len(times) < 2:
+        return None
+    mean, var, maps, noise = [], [], [], []
+    for t in times:
+        stacks = [f.astype(np.float64) for f in by_t[t]]
+        n = np.array([s.shape[0] for s in stacks], dtype=np.float64)
+        mean.append(float(np.average([s.mean() for s in stacks], weights=n)))
+        v = float(np.average([np.mean(np.var(s, axis=0, ddof=1)) for s in stacks], weights=n))
+        var.append(v)
+        maps.append(sum(ni * s.mean(0) for ni, s in zip(n, stacks)) / n.sum())
+        noise.append(v / n.sum())
+    t = np.asarray(times)
+    c = (t - t.mean()) / np.sum((t - t.mean()) ** 2)
+    raw = sum(ci * m for ci, m in zip(c, maps))  # per-pixel least-squares slope (DN/s)
+    # hot pixels whose charge grows with the exposure are no dark current of the array: slopes beyond
+    # 10 robust sigma above the median are left out of the mean slope (the mean over the others)
+    keep = raw <= np.median(raw) + 10 * robust_sigma(raw)
+    slope_m = float(raw[keep].mean())
+    slope_v = float(np.polyfit(t, var, 1)[0])
+    gain = float(K) if K is not None and np.isfinite(K) and K > 0 else (slope_v / slope_m if slope_m > 0 else 0.0)
+    slope_map = remove_profiles(raw)[keep]
+    s2 = robust_sigma(slope_map) ** 2 - float(np.sum(c ** 2 * np.asarray(noise)))
+    cv = float(np.sqrt(s2)) / slope_m if s2 > 0 and slope_m > 0 else 0.0
+    return {"exposure_s": times, "mean_dn": mean, "temporal_var_dn2": var, "dn_per_s": slope_m,
+            "dn2_per_s": slope_v, "gain_dn_per_e": gain,
+            "e_per_s": slope_m / gain if gain > 0 else 0.0,
+            "log_sigma": float(np.sqrt(np.log1p(cv * cv)))}

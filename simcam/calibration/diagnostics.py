@@ -31,6 +31,9 @@ hot_pixel_tail          hot_pixels          fraction of pixels whose dark tempor
 prnu_excess             prnu                per plane (even/odd flat-map covariance - same of the
                                             darks) / signal^2, mean over planes
 black_offset            black_level_offset  median of dark mean map - declared black (DN)
+dark_signal_slope       dark_current        least-squares slope of the dark level (1 %-trimmed mean of
+                                            each sequence's temporal-mean image: hot pixels left out)
+                                            against exposure time, darks at every exposure time (DN/s)
 frame_mean_jitter       frame_flicker       var of flat frame means / signal^2
 dark_tail_mass          heavy_tail_read     fraction of dark residuals beyond 4 IQR-sigma
 dark_ppcc_lambda        heavy_tail_read     Tukey-lambda shape maximising the PPCC of dark residuals
@@ -59,7 +62,7 @@ PLANE_OFFSETS = ((0, 0), (0, 1), (1, 0), (1, 1))
 DIAGNOSTICS = (
     "ptc_curvature", "plane_gain_spread", "row_mean_excess", "row_spectrum_peak", "col_spectrum_peak",
     "col_temporal_excess", "dark_checker_jitter", "col_fpn_excess", "dsnu_excess", "hot_pixel_tail", "prnu_excess",
-    "black_offset", "frame_mean_jitter", "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "lag1_corr",
+    "black_offset", "dark_signal_slope", "frame_mean_jitter", "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "lag1_corr",
     "lag2_corr",
 )
 
@@ -73,12 +76,14 @@ PRECEDENCE = {
     "dark_checker_jitter": ("lag1_corr", "lag2_corr", "code_occupancy"),
     "dsnu_excess": ("hot_pixel_tail",),
     "col_fpn_excess": ("hot_pixel_tail", "dsnu_excess"),  # per-pixel fixed offsets leak into column means
-    "black_offset": ("hot_pixel_tail", "col_fpn_excess", "dsnu_excess"),
+    # a dark current is the one symptom at every exposure time; at the shortest one it lifts the dark level
+    "black_offset": ("dark_signal_slope", "hot_pixel_tail", "col_fpn_excess", "dsnu_excess"),
     "frame_mean_jitter": ("row_spectrum_peak", "row_mean_excess", "col_spectrum_peak"),
     "plane_gain_spread": ("ptc_curvature",),
-    "dark_tail_mass": ("code_occupancy",),
-    "dark_ppcc_lambda": ("code_occupancy",),
-    "hot_pixel_tail": ("dark_tail_mass", "dark_ppcc_lambda"),
+    # hot pixels whose offset is charge carry its shot noise: a temporal tail of their own, which their
+    # persistent offset (the more specific symptom) explains
+    "dark_tail_mass": ("code_occupancy", "hot_pixel_tail"),
+    "dark_ppcc_lambda": ("code_occupancy", "hot_pixel_tail"),
     "lag1_corr": ("code_occupancy",),
     "lag2_corr": ("code_occupancy", "lag1_corr"),
 }
@@ -110,6 +115,7 @@ NEEDS = {
     "hot_pixel_tail": "needs a dark sequence",
     "prnu_excess": "needs a flat sequence",
     "black_offset": "needs a dark sequence and a declared black level",
+    "dark_signal_slope": "needs darks at >= 2 exposure times",
     "frame_mean_jitter": "needs a flat sequence",
     "dark_tail_mass": "needs a dark sequence",
     "dark_ppcc_lambda": "needs a dark sequence",
@@ -133,6 +139,8 @@ class CaptureData:
 
     ``darks``/``flats``: lists of (n, H, W); ``scenes``: list of ((n, H, W), clean or None);
     ``black_dn`` (2, 2) declared black or None; ``cfa`` pattern or None (mono).
+    ``darks`` are those of one exposure time (the shortest); ``dark_series``: (exposure_s, frames) of
+    the darks at every exposure time when there are >= 2 of them (dark current), else None.
     """
 
     darks: list
@@ -142,20 +150,24 @@ class CaptureData:
     white_dn: float
     cfa: str | None
     cache: dict = field(default_factory=dict)
+    dark_series: list | None = None
 
     def like(self, frames: list, specs: list) -> "CaptureData":
         """A capture with this one's structure (black, white, CFA) holding ``frames``, one (n, H, W) stack
         per sequence of ``specs`` (``SimSpec``: kind; a scene's clean reference is its ``signal_dn``
         unless ``fixed_in_clean``): simulated captures as the diagnostics see them."""
-        darks, flats, scenes = [], [], []
+        darks, flats, scenes, series = [], [], [], []
         for sp, f in zip(specs, frames, strict=True):
             if sp.kind == "dark":
-                darks.append(f)
+                series.append((sp.exposure_s, f))
+                if not sp.series_only:
+                    darks.append(f)
             elif sp.kind == "flat":
                 flats.append(f)
             else:
                 scenes.append((f, None if sp.fixed_in_clean else sp.signal_dn))
-        return CaptureData(darks, flats, scenes, self.black_dn, self.white_dn, self.cfa)
+        return CaptureData(darks, flats, scenes, self.black_dn, self.white_dn, self.cfa,
+                           dark_series=series if self.dark_series is not None else None)
 
     # ---- shared intermediates (cached) ---------------------------------
     def temporal_residuals(self, which: str) -> list[np.ndarray]:
@@ -635,6 +647,18 @@ def lag1_corr(d):
 
 def lag2_corr(d):
     return _lag_corr(d, 2)
+
+
+def dark_signal_slope(d: CaptureData):
+    """Slope (DN/s) of the dark level against exposure time (EMVA 1288 R4.0 sec. 4.2); the level of a
+    sequence is the 1 %-trimmed mean of its temporal-mean image, so a few hot pixels (whose charge may
+    grow with the exposure too) do not make a dark current."""
+    if not d.dark_series or len({t for t, _ in d.dark_series}) < 2:
+        return None
+    t = np.array([float(t) for t, _ in d.dark_series])
+    m = np.array([float(sst.trim_mean(f.astype(np.float64).mean(0).ravel(), 0.01)) for _, f in d.dark_series])
+    w = np.array([f.shape[0] for _, f in d.dark_series], dtype=np.float64)
+    return float(np.polyfit(t, m, 1, w=np.sqrt(w))[0])
 
 
 STATISTICS = {name: globals()[name] for name in DIAGNOSTICS}

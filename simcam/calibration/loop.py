@@ -90,14 +90,14 @@ def _fmt_s(t: float) -> str:
 
 
 def dark_exposure(darks: list[Sequence]) -> float | None:
-    """The exposure time (s; -1 when not given) whose dark sequences hold the most frames (ties: the
-    shortest); None without darks."""
+    """The exposure time (s; -1 when not given) of the darks the dark diagnostics, the black level, the
+    read noise and the DSNU are measured on: the shortest given one (EMVA 1288 Release 4.0 measures
+    the temporal dark noise at the shortest exposure time, where the dark current adds least); -1
+    when no dark sequence gives its exposure time; None without darks."""
     if not darks:
         return None
-    frames: dict[float, int] = {}
-    for s in darks:
-        frames[_t(s)] = frames.get(_t(s), 0) + s.n
-    return max(sorted(frames), key=lambda t: frames[t])
+    given = sorted(_t(s) for s in darks if _t(s) >= 0)
+    return given[0] if given else -1.0
 
 
 class Group:
@@ -117,18 +117,23 @@ class Group:
         if not self.seqs:
             raise DatasetError(f"ISO {seqs[0].iso}: no usable sequence left (all saturated)")
         self.dark_exposure_s = None
+        self.series = False  # darks at >= 2 given exposure times: the dark-current series
         darks = [s for s in self.seqs if s.kind == "dark"]
         t_dark = dark_exposure(darks)
         if t_dark is not None:
             self.dark_exposure_s = t_dark
             other = sorted({_t(s) for s in darks} - {t_dark})
             if other:
-                self.seqs = [s for s in self.seqs if s.kind != "dark" or _t(s) == t_dark]
+                self.series = t_dark >= 0
+                if not self.series or any(t < 0 for t in other):  # darks without an exposure time: left out
+                    self.seqs = [s for s in self.seqs if s.kind != "dark" or _t(s) == t_dark
+                                 or (self.series and _t(s) >= 0)]
                 listed = ", ".join(_fmt_s(t) for t in other) if len(other) <= 4 else \
                     f"{len(other)} other exposure times ({_fmt_s(other[0])} to {_fmt_s(other[-1])})"
-                notes.append(f"darks at {_fmt_s(t_dark)} used by the loop (the exposure time with the most dark "
-                             f"frames); darks at {listed} only in the dark-current fit "
-                             "(dark sequences of different exposure times are not pooled)")
+                notes.append(f"darks at {_fmt_s(t_dark)} used for the dark diagnostics, black level, read noise "
+                             f"and DSNU (the shortest exposure time); darks at {listed} only in the dark-current "
+                             "diagnostic and fit and in the held-out error (dark sequences of different "
+                             "exposure times are not pooled)")
         r0 = self.seqs[0]
         self.cfa, self.white = r0.cfa, r0.white_dn
         self.black = r0.black_dn
@@ -151,11 +156,16 @@ class Group:
         self.fit_data = self._data(self.fit)
         self.held_data = self._data(self.held)
 
+    def series_only(self, s: Sequence) -> bool:
+        """A dark at another exposure time than the dark diagnostics' (dark-current series only)."""
+        return s.kind == "dark" and _t(s) != self.dark_exposure_s
+
     def _data(self, part) -> dg.CaptureData:
-        darks = [f for s, f, _ in part if s.kind == "dark"]
+        darks = [f for s, f, _ in part if s.kind == "dark" and not self.series_only(s)]
         flats = [f for s, f, _ in part if s.kind == "flat"]
         scenes = [(f, c) for s, f, c in part if s.kind == "scene"]
-        return dg.CaptureData(darks, flats, scenes, self.black, self.white, self.cfa)
+        series = [(max(_t(s), 0.0), f) for s, f, _ in part if s.kind == "dark"] if self.series else None
+        return dg.CaptureData(darks, flats, scenes, self.black, self.white, self.cfa, dark_series=series)
 
     def specs(self, model: LoopModel, part) -> list[SimSpec]:
         out = []
@@ -171,7 +181,8 @@ class Group:
             else:
                 ref = clean if clean is not None else f.astype(np.float64).mean(0)
                 sig = ref - base
-            out.append(SimSpec(s.kind, f.shape[0], sig, fixed_in_clean=(s.kind == "scene" and clean is None)))
+            out.append(SimSpec(s.kind, f.shape[0], sig, fixed_in_clean=(s.kind == "scene" and clean is None),
+                               exposure_s=max(_t(s), 0.0), series_only=self.series_only(s)))
         return out
 
 
@@ -354,7 +365,8 @@ class Loop:
             card = card_for(effect)
             ctx = FitContext(diagnostic=chosen.name, value=chosen.value, sim_mean=chosen.sim_mean,
                              seed=cfg.seed * 1000 + tag, simulate=simulate_capture,
-                             dark_specs=[sp for sp in self.g.specs(model, self.g.fit) if sp.kind == "dark"])
+                             dark_specs=[sp for sp in self.g.specs(model, self.g.fit)
+                                         if sp.kind == "dark" and not sp.series_only])
             if card.needs_darks and not ctx.dark_specs:
                 excluded.add(chosen.name)
                 res.unexplained.append({"diagnostic": chosen.name, "discrepancy": chosen.z,

@@ -148,12 +148,17 @@ def _plain(v):
 class SimSpec:
     """What to simulate for one sequence: ``signal_dn`` (H, W) mean signal above black (DN,
     as measured, i.e. after the nonlinearity), ``n`` frames; ``fixed_in_clean`` when the
-    signal is a temporal mean that already holds the fixed patterns (scene without clean)."""
+    signal is a temporal mean that already holds the fixed patterns (scene without clean);
+    ``exposure_s`` its exposure time (0 when not given: exposure-dependent effects add nothing);
+    ``series_only`` for darks at another exposure time than the diagnostics' darks (they enter the
+    dark-current series and the held-out error only)."""
 
     kind: str
     n: int
     signal_dn: np.ndarray
     fixed_in_clean: bool = False
+    exposure_s: float = 0.0
+    series_only: bool = False
 
 
 def site_map(values, shape) -> np.ndarray:

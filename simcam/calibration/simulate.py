@@ -12,7 +12,8 @@ The expected signal a sequence is simulated from is the measured one taken back 
 response (:func:`simcam.calibration.model.linear_signal`). Frames of a sequence come from
 ``Composite.sample_frames`` (fixed patterns drawn once per simulated sensor, base noise of all
 frames in one kernel pass); each call of :func:`simulate_capture` is a new sensor (sensor seed
-drawn from ``rng``).
+drawn from ``rng``). Every sequence is drawn with its own exposure time (``SimSpec.exposure_s``, the
+``NoiseCondition``'s), which the exposure-dependent effects (``dark_current``) use.
 """
 
 from __future__ import annotations
@@ -57,7 +58,6 @@ def simulate_capture(model: LoopModel, specs: list[SimSpec], rng) -> list[np.nda
     entry["sensor_seed"] = int(rng.integers(0, 2**31))
     comp = model_from_entry(entry, where="loop model")
     bare = None
-    cond = NoiseCondition(cfa=model.cfa or "RGGB", source="loop simulation")
     fs = model.full_scale_dn
     black = float(np.mean(model.black_dn))
     q = model.q
@@ -68,6 +68,7 @@ def simulate_capture(model: LoopModel, specs: list[SimSpec], rng) -> list[np.nda
             if bare is None:
                 bare = comp.model_copy(update={"effects": [e for e in comp.effects if e.type not in FIXED_EFFECTS]})
             m = bare
+        cond = NoiseCondition(cfa=model.cfa or "RGGB", source="loop simulation", exposure_s=float(sp.exposure_s))
         clean = (linear_signal(model, sp.signal_dn) / fs).astype(np.float32)
         x = m.sample_frames(clean, cond, rng, sp.n).astype(np.float64)
         x *= fs

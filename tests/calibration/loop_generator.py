@@ -7,6 +7,7 @@ Signal chain (all in DN, per pixel ``p`` of frame ``f``; EMVA 1288 R4.0 sec. 2,
 seed eq. 3.6 for the Poisson-Gaussian core)::
 
     e      ~ Poisson(mu_e[p] * (1 + prnu[p]) * (1 + flicker[f]))        photo-electrons
+    e     += Poisson(dark_rate[p] * t)                                  dark electrons (exposure t)
     x      = K * g[c] * e + read[f, p] + row[f, r] + periodic[f, r]     DN, linear
     y      = x + c_nl * x**2 / (white - black)                          compressive response
     v      = black + offset + dsnu[p] + col[c] + hot[p] + y
@@ -23,6 +24,8 @@ seed eq. 3.6 for the Poisson-Gaussian core)::
   sequences: ``dsnu`` N(0, s^2) per pixel, ``col`` N(0, s^2) per column
   (``column_fpn``), ``prnu`` N(0, s^2) per pixel, ``hot`` a set of pixels with
   an exponential extra offset (``hot_pixels``).
+* ``dark_rate`` (``dark_current``) log-normal per pixel (mean ``rate_e_per_s``, log-spread
+  ``log_sigma``), drawn once per sensor; with it, :func:`capture_set` adds a second dark at 1 s.
 * ``flicker`` N(0, s^2) per frame, only where there is light (``frame_flicker``).
 * ``column_noise`` N(0, s^2) per frame and column: deliberately *outside* simcam's effect
   vocabulary (temporal column noise), to test that the loop reports it as unexplained.
@@ -41,7 +44,7 @@ import yaml
 EFFECTS = (
     "row_noise", "column_fpn", "dsnu", "prnu", "hot_pixels", "heavy_tail_read", "quantization",
     "spatial_correlation", "periodic_pattern", "black_level_offset", "frame_flicker",
-    "nonlinearity", "channel_gain",
+    "nonlinearity", "channel_gain", "dark_current",
 )
 
 #: Parameters the tests use for each effect alone (chosen well above the
@@ -60,6 +63,7 @@ DEFAULT_EFFECTS = {
     "frame_flicker": {"sigma": 0.01},
     "nonlinearity": {"c": -0.12},
     "channel_gain": {"gains": [1.15, 1.0, 1.0, 0.85]},
+    "dark_current": {"rate_e_per_s": 40.0, "log_sigma": 0.3},
 }
 
 
@@ -132,14 +136,19 @@ class HiddenEffectSensor:
         self.prnu = np.ones((h, w))
         if "prnu" in eff:
             self.prnu += rng.normal(0, eff["prnu"]["sigma"], (h, w))
+        self.dark_rate = None
+        if "dark_current" in eff:
+            p = eff["dark_current"]
+            self.dark_rate = p["rate_e_per_s"] * np.exp(p["log_sigma"] * rng.standard_normal((h, w))
+                                                        - p["log_sigma"] ** 2 / 2)
         self.gain = np.ones((h, w))
         if "channel_gain" in eff:
             g = eff["channel_gain"]["gains"]
             for k, (dy, dx) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):
                 self.gain[dy::2, dx::2] = g[k]
 
-    def frames(self, mu_e: np.ndarray | float, n_frames: int, rng) -> np.ndarray:
-        """``n_frames`` x H x W frames in DN (float32 holding integer codes)."""
+    def frames(self, mu_e: np.ndarray | float, n_frames: int, rng, exposure_s: float = 0.01) -> np.ndarray:
+        """``n_frames`` x H x W frames in DN (float32 holding integer codes) at ``exposure_s`` seconds."""
         s, eff = self.spec, self.spec.effects
         h, w = s.height, s.width
         mu = np.broadcast_to(np.asarray(mu_e, dtype=np.float64), (h, w)) * self.prnu
@@ -148,7 +157,10 @@ class HiddenEffectSensor:
             lam = mu
             if "frame_flicker" in eff:
                 lam = lam * (1 + rng.normal(0, eff["frame_flicker"]["sigma"]))
-            x = s.K * self.gain * rng.poisson(np.maximum(lam, 0))
+            e = rng.poisson(np.maximum(lam, 0))
+            if self.dark_rate is not None:
+                e = e + rng.poisson(self.dark_rate * exposure_s)
+            x = s.K * self.gain * e
             if "heavy_tail_read" in eff:
                 t = eff["heavy_tail_read"]["lam"]
                 read = _tukey(t, (h, w), rng) / np.sqrt(_tukey_var(t))
@@ -191,13 +203,16 @@ def capture_set(spec: SensorSpec, *, n_frames: int = 12, flat_levels=(0.15, 0.35
             site[dy::2, dx::2] = colour[k]
     meta = {"iso": spec.iso, "cfa": spec.cfa, "black_level": spec.black_dn, "white_level": spec.white_dn}
     out = {"dark": ("dark", sensor.frames(0.0, n_frames, rng), dict(meta, exposure_s=0.01))}
+    if "dark_current" in spec.effects:
+        out["dark_long"] = ("dark", sensor.frames(0.0, n_frames, rng, 1.0), dict(meta, exposure_s=1.0))
     for i, lev in enumerate(flat_levels):
         mu_e = lev * full / spec.K * site
-        out[f"flat_{i}"] = ("flat", sensor.frames(mu_e, n_frames, rng), dict(meta, exposure_s=0.01 * (i + 1)))
+        out[f"flat_{i}"] = ("flat", sensor.frames(mu_e, n_frames, rng, 0.01 * (i + 1)),
+                            dict(meta, exposure_s=0.01 * (i + 1)))
     if scene:
         yy, xx = np.mgrid[0:spec.height, 0:spec.width]
         mu_e = (0.1 + 0.5 * xx / spec.width) * full / spec.K * site
-        out["scene"] = ("scene", sensor.frames(mu_e, n_frames, rng), dict(meta, exposure_s=0.02))
+        out["scene"] = ("scene", sensor.frames(mu_e, n_frames, rng, 0.02), dict(meta, exposure_s=0.02))
     return out
 
 

@@ -39,7 +39,7 @@ def scaled(effect: str, scale: float) -> dict:
     p = dict(DEFAULT_EFFECTS[effect])
     if scale == 1.0:
         return p
-    for k in ("sigma_dn", "sigma", "amplitude_dn", "offset_dn", "mean_dn", "a", "c"):
+    for k in ("sigma_dn", "sigma", "amplitude_dn", "offset_dn", "mean_dn", "a", "c", "rate_e_per_s"):
         if k in p:
             p[k] = p[k] * scale
     if "gains" in p:

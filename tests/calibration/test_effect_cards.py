@@ -16,6 +16,7 @@ from simcam.calibration.effects import CARDS, DIAGNOSTIC_EFFECT, EffectCard, Eff
 from simcam.calibration.effects.black_level_offset import BlackLevelOffset
 from simcam.calibration.effects.channel_gain import ChannelGain
 from simcam.calibration.effects.column_fpn import ColumnFpn
+from simcam.calibration.effects.dark_current import DarkCurrent
 from simcam.calibration.effects.dsnu import Dsnu
 from simcam.calibration.effects.frame_flicker import FrameFlicker
 from simcam.calibration.effects.heavy_tail_read import HeavyTailRead
@@ -41,6 +42,7 @@ EXAMPLES = {
     "row_noise": RowNoise(sigma_dn=1.5),
     "periodic_pattern": PeriodicPattern(amplitude_dn=2.0, period_px=8.0, axis="col"),
     "nonlinearity": Nonlinearity(c=-0.1),
+    "dark_current": DarkCurrent(rate_e_per_s=40.0, log_sigma=0.3, gain_dn_per_e=2.0),
     "column_fpn": ColumnFpn(sigma_dn=1.0),
     "dsnu": Dsnu(sigma_dn=2.0),
     "hot_pixels": HotPixels(fraction=0.004, log_mean=3.9, log_sigma=0.75, count=16),

@@ -13,7 +13,7 @@ at its place in the signal chain, and give it an example in
 from __future__ import annotations
 
 from .. import diagnostics as _dg
-from . import (black_level_offset, channel_gain, column_fpn, dsnu, frame_flicker, heavy_tail_read, hot_pixels,
+from . import (black_level_offset, channel_gain, column_fpn, dark_current, dsnu, frame_flicker, heavy_tail_read, hot_pixels,
                nonlinearity, periodic_pattern, prnu, quantization, row_noise, spatial_correlation)
 from .card import EffectCard, EffectParams, Fit, FitContext, ProfileTerm
 
@@ -31,6 +31,7 @@ CARDS: dict[str, EffectCard] = {c.name: c for c in (
     spatial_correlation.SpatialCorrelationCard(),
     row_noise.RowNoiseCard(),
     periodic_pattern.PeriodicPatternCard(),
+    dark_current.DarkCurrentCard(),
     nonlinearity.NonlinearityCard(),
     column_fpn.ColumnFpnCard(),
     dsnu.DsnuCard(),

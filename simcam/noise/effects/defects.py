@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Literal, Optional
 
 import numpy as np
 from pydantic import Field, model_validator
@@ -34,12 +34,19 @@ class HotPixels(Effect):
         Their value, normalised raw (1.0 = saturated).
     dead_fraction : float
         Fraction of pixels that always read 0.
+    hot_electron : float, optional
+        Normalised raw per electron (``K / (white - black)``). With it the hot pixels' extra signal
+        is dark *charge*: each frame adds ``hot_electron * Poisson(offset / hot_electron)`` (same
+        mean, plus its shot noise, as dark electrons carry: EMVA 1288 R4.0 sec. 4.2; A. Abdelhamed,
+        *Noise Modelling for Smartphone Cameras*, PhD dissertation, York University, 2020, ch. 2).
+        None (default): a fixed offset, no temporal noise of its own.
     """
 
     type: Literal["hot_pixels"] = "hot_pixels"
     hot_fraction: float = Field(0.0, ge=0, le=1)
     hot_offset: float = 0.05
     hot_log_sigma: float = Field(0.0, ge=0)
+    hot_electron: Optional[float] = Field(None, gt=0)
     stuck_fraction: float = Field(0.0, ge=0, le=1)
     stuck_value: float = 1.0
     dead_fraction: float = Field(0.0, ge=0, le=1)
@@ -49,6 +56,12 @@ class HotPixels(Effect):
         if self.hot_fraction + self.stuck_fraction + self.dead_fraction > 1:
             raise ValueError("hot_fraction + stuck_fraction + dead_fraction must be <= 1")
         return self
+
+    def to_entry(self):
+        out = super().to_entry()
+        if self.hot_electron is None:  # off: the entry as before the option existed
+            out.pop("hot_electron")
+        return out
 
     def fixed(self, shape, rng):
         u = rng.random(shape)
@@ -66,7 +79,13 @@ class HotPixels(Effect):
 
     def apply(self, x, ctx):
         flat = x.reshape(-1)
-        flat[ctx.fixed["hot"]] += ctx.fixed.get("hot_offset", np.float32(self.hot_offset))
+        off = ctx.fixed.get("hot_offset", np.float32(self.hot_offset))
+        if self.hot_electron is None:
+            flat[ctx.fixed["hot"]] += off
+        elif ctx.fixed["hot"].size:  # dark charge: Poisson electrons, one draw per frame (whole frame, block 0)
+            e = float(self.hot_electron)
+            lam = np.broadcast_to(np.asarray(off, dtype=np.float64) / e, ctx.fixed["hot"].shape)
+            flat[ctx.fixed["hot"]] += (np.float32(e) * ctx.block_rng(0).poisson(lam)).astype(np.float32)
         flat[ctx.fixed["stuck"]] = np.float32(self.stuck_value)
         flat[ctx.fixed["dead"]] = np.float32(0.0)
         return x
