@@ -182,7 +182,15 @@ class CameraMeta:
         return [op.parsed for op in ops if isinstance(op.parsed, GainMap)]
 
     def copy(self) -> "CameraMeta":
-        return copy.deepcopy(self)
+        """An independent copy, except that the opcodes are shared.
+
+        Opcodes (and their decoded GainMaps, whose gains are read-only) are never modified in
+        place, so every stage's copy shares them: a file with tens of thousands of GainMaps costs
+        no more per stage than one without. The lists themselves are new.
+        """
+        lists = {f"opcode_list{k}": getattr(self, f"opcode_list{k}") for k in (1, 2, 3)}
+        memo = {id(ops): list(ops) for ops in lists.values()}
+        return copy.deepcopy(self, memo)
 
     def replace(self, **changes: Any) -> "CameraMeta":
         new = self.copy()

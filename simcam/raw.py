@@ -68,6 +68,16 @@ def black_level_cell(meta, shape: tuple[int, int]) -> np.ndarray | None:
     return np.roll(bl, (-oy, -ox), axis=(0, 1)).astype(np.float32)
 
 
+def _check_finite_levels(meta, black, white) -> None:
+    """Black and white levels must be finite (DNG 1.7.0.0 chapter 5): NaN would reach the image silently."""
+    src = meta.source or "frame"
+    if not np.isfinite(white):
+        raise MetadataError(f"{src}: WhiteLevel: {float(white)}; expected a finite level")
+    if not np.all(np.isfinite(black)):
+        raise MetadataError(f"{src}: BlackLevel: non-finite value; expected finite levels (BlackLevel, "
+                            f"BlackLevelDeltaH/V)")
+
+
 def normalize(frame: RawFrame, *, black_level: float | None = None, white_level: float | None = None) -> RawFrame:
     """DN -> normalised raw: linearization, per-site black (with deltas), white. No clipping.
 
@@ -109,6 +119,7 @@ def normalize(frame: RawFrame, *, black_level: float | None = None, white_level:
         cell = black_level_cell(meta, data.shape)
         black = cell if cell is not None else black_level_map(meta, data.shape)
     white = np.float32(white_level if white_level is not None else meta.white_level)
+    _check_finite_levels(meta, black, white)
     scale = white - black
     if np.any(scale <= 0):
         raise MetadataError(

@@ -365,7 +365,7 @@ class DngColorProfile:
 def xy_to_camera_neutral(profile: DngColorProfile, xy) -> np.ndarray:
     """Camera neutral (stored-value space, normalised so G = 1) of white ``xy`` (DNG 1.6 ch. 6)."""
     neutral = profile.xyz_to_camera(xy) @ xy_to_xyz(xy)
-    if not np.all(np.isfinite(neutral)) or neutral[1] <= 0:
+    if not np.all(np.isfinite(neutral)) or np.any(neutral <= 0):
         raise MetadataError(
             f"{profile.source}: {profile._cm_tag()}: white xy {_fmt(xy)} maps to a camera neutral "
             f"{_fmt(neutral)}; expected positive values")
@@ -435,18 +435,20 @@ def camera_to_xyz_d50(profile: DngColorProfile, *, neutral=None, xy=None,
     return bradford_matrix(xy_to_xyz(xy), xy_to_xyz(D50_XY)) @ cam_to_xyz
 
 
-def normalise_white_luminance(matrix, neutral) -> np.ndarray:
+def normalise_white_luminance(matrix, neutral, source: str = "metadata", tag: str = "ColorMatrix1") -> np.ndarray:
     """Scale a camera -> XYZ matrix so the white at clipping maps to Y = 1.
 
     The white at clipping is the camera neutral scaled so its largest channel is 1
     (the Adobe DNG SDK's convention for both paths). Unit: the result maps
-    normalised raw to XYZ with Y = 1 for that white.
+    normalised raw to XYZ with Y = 1 for that white. ``source`` (the file) and ``tag`` (the
+    matrix the transform came from) name the culprit in the error.
     """
     neutral = np.asarray(neutral, dtype=np.float64)
     white = neutral / neutral.max()
     y = float((np.asarray(matrix, dtype=np.float64) @ white)[1])
     if not np.isfinite(y) or y <= 0:
-        raise MetadataError(f"camera->XYZ matrix maps the white {_fmt(white)} to Y = {y:.6g}; expected Y > 0")
+        raise MetadataError(f"{source}: {tag}: the camera->XYZ matrix maps the white {_fmt(white)} to "
+                            f"Y = {y:.6g}; expected Y > 0")
     return np.asarray(matrix, dtype=np.float64) / y
 
 

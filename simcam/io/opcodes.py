@@ -14,6 +14,7 @@ of :func:`decode_gain_map`.
 
 from __future__ import annotations
 
+import math
 import struct
 
 import numpy as np
@@ -27,10 +28,14 @@ GAIN_MAP_ID = 9
 #: MapOriginH (float64), MapPlanes (uint32). DNG 1.6 spec, "GainMap".
 _GAIN_MAP_HEADER = struct.Struct(">10I4dI")
 _OPCODE_HEADER = struct.Struct(">I4BII")
+#: Largest gain simcam applies: a gain above it would lift any non-zero 16-bit code past white.
+MAX_GAIN = 65536.0
+#: Smallest normal float64; a subnormal MapSpacing would overflow the map position of a pixel.
+_MIN_NORMAL = float(np.finfo(np.float64).tiny)
 
 
 def decode_gain_map(payload: bytes, *, where: str = "GainMap") -> GainMap:
-    """Decode a GainMap opcode payload (big-endian).
+    """Decode a GainMap opcode payload (big-endian) and check its parameters.
 
     Parameters
     ----------
@@ -42,7 +47,14 @@ def decode_gain_map(payload: bytes, *, where: str = "GainMap") -> GainMap:
     Returns
     -------
     GainMap
-        ``gains`` has shape (MapPointsV, MapPointsH, MapPlanes), float32.
+        ``gains`` has shape (MapPointsV, MapPointsH, MapPlanes), float32, read-only (the
+        metadata is shared between frames, never copied per stage).
+
+    Raises
+    ------
+    DngError
+        A payload of the wrong size, or a parameter the DNG SDK refuses or simcam cannot apply
+        (:func:`check_gain_map`).
     """
     if len(payload) < _GAIN_MAP_HEADER.size:
         raise DngError(f"{where}: GainMap payload of {len(payload)} bytes; expected at least {_GAIN_MAP_HEADER.size}")
@@ -57,9 +69,43 @@ def decode_gain_map(payload: bytes, *, where: str = "GainMap") -> GainMap:
         raise DngError(f"{where}: GainMap MapPointsV/H/MapPlanes = {points_v}/{points_h}/{map_planes}; expected >= 1")
     gains = np.frombuffer(payload, dtype=">f4", count=n, offset=_GAIN_MAP_HEADER.size)
     gains = gains.astype(np.float32).reshape(points_v, points_h, map_planes)
-    return GainMap(top=top, left=left, bottom=bottom, right=right, plane=plane, planes=planes,
-                   row_pitch=row_pitch, col_pitch=col_pitch, map_spacing_v=spacing_v, map_spacing_h=spacing_h,
-                   map_origin_v=origin_v, map_origin_h=origin_h, gains=gains)
+    gains.setflags(write=False)
+    gm = GainMap(top=top, left=left, bottom=bottom, right=right, plane=plane, planes=planes,
+                 row_pitch=row_pitch, col_pitch=col_pitch, map_spacing_v=spacing_v, map_spacing_h=spacing_h,
+                 map_origin_v=origin_v, map_origin_h=origin_h, gains=gains)
+    check_gain_map(gm, where=where)
+    return gm
+
+
+def _check_axis(points: int, spacing: float, origin: float, axis: str, where: str) -> None:
+    """MapSpacing / MapOrigin of one axis (ignored by the SDK for a one-point axis)."""
+    if points == 1:
+        return
+    if not (math.isfinite(spacing) and spacing >= _MIN_NORMAL):
+        raise DngError(f"{where}: GainMap MapSpacing{axis} {spacing!r}; expected a finite number > 0 "
+                       f"(at least {_MIN_NORMAL:.3g})")
+    if not math.isfinite(origin):
+        raise DngError(f"{where}: GainMap MapOrigin{axis} {origin!r}; expected a finite number")
+
+
+def check_gain_map(gm: GainMap, *, where: str = "GainMap") -> None:
+    """Check a GainMap's parameters (DNG 1.7.0.0 section 7, opcode 9; DNG SDK ``dng_gain_map::GetStream``).
+
+    As the SDK: MapSpacing > 0 on an axis of more than one point (a one-point axis ignores spacing
+    and origin), at least one point and plane; as ``dng_area_spec``: Planes, RowPitch and ColPitch
+    at least 1. Beyond the SDK, so that no NaN or infinity reaches the image: spacing and origin
+    finite (spacing a normal float64), gains finite and within 0 .. :data:`MAX_GAIN`.
+    """
+    if gm.planes < 1 or gm.row_pitch < 1 or gm.col_pitch < 1:
+        raise DngError(f"{where}: GainMap Planes/RowPitch/ColPitch = {gm.planes}/{gm.row_pitch}/{gm.col_pitch}; "
+                       f"expected >= 1")
+    pv, ph = int(gm.gains.shape[0]), int(gm.gains.shape[1])
+    _check_axis(pv, float(gm.map_spacing_v), float(gm.map_origin_v), "V", where)
+    _check_axis(ph, float(gm.map_spacing_h), float(gm.map_origin_h), "H", where)
+    g = np.asarray(gm.gains)
+    if not (g.min() >= 0 and g.max() <= MAX_GAIN):  # NaN fails both comparisons
+        bad = ~(np.isfinite(g) & (g >= 0) & (g <= MAX_GAIN))
+        raise DngError(f"{where}: GainMap gain {float(g[bad][0])!r}; expected finite gains 0 to {MAX_GAIN:g}")
 
 
 def encode_gain_map(gm: GainMap) -> bytes:
@@ -129,3 +175,52 @@ def serialise_opcode_list(ops: list[Opcode]) -> bytes:
         out.append(_OPCODE_HEADER.pack(int(op.id), *(int(v) for v in op.version), int(op.flags), len(payload)))
         out.append(payload)
     return b"".join(out)
+
+
+#: Work cap of one opcode list, in samples touched: at most ``max(MAX_OPCODE_WORK,
+#: OPCODE_WORK_FACTOR x the samples of the image it applies to)`` (real files touch each sample
+#: about once: four GainMaps of pitch 2, one per Bayer phase).
+MAX_OPCODE_WORK = 1 << 28
+OPCODE_WORK_FACTOR = 8
+#: Opcodes that cost no pass over the image (TrimBounds) or that simcam does not apply.
+_FREE_OPCODES = {6}
+_APPLIED_OPCODES = {1, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13}
+
+
+def _grid_count(start: int, stop: int, pitch: int, size: int) -> int:
+    """How many of ``start, start + pitch, ... < stop`` lie in ``0 .. size - 1`` (start >= 0)."""
+    stop = min(int(stop), size)
+    return max(0, -(-(stop - int(start)) // max(int(pitch), 1)))
+
+
+def gain_map_samples(gm: GainMap, height: int, width: int, planes: int) -> int:
+    """Samples a GainMap multiplies on a ``height x width x planes`` image (its area spec, DNG 1.7.0.0 sec. 7)."""
+    rows = _grid_count(gm.top, gm.bottom, gm.row_pitch, height)
+    cols = _grid_count(gm.left, gm.right, gm.col_pitch, width)
+    n_planes = max(0, min(int(gm.plane) + max(int(gm.planes), 1), planes) - int(gm.plane))
+    return rows * cols * n_planes
+
+
+def opcode_list_work(ops: list[Opcode], height: int, width: int, planes: int) -> int:
+    """Samples an opcode list touches: each GainMap its selection, any other applied opcode the whole image."""
+    work = 0
+    for op in ops:
+        if isinstance(op.parsed, GainMap):
+            work += gain_map_samples(op.parsed, height, width, planes)
+        elif op.id in _APPLIED_OPCODES and op.id not in _FREE_OPCODES:
+            work += height * width * planes
+    return work
+
+
+def check_opcode_work(ops: list[Opcode], height: int, width: int, planes: int, *, where: str) -> None:
+    """Refuse an opcode list that would take far more passes over the image than any camera writes.
+
+    The cost of a list is linear in the samples its opcodes touch (:func:`opcode_list_work`), so a
+    small file with tens of thousands of whole-image GainMaps would take minutes on a large image.
+    """
+    samples = height * width * planes
+    cap = max(MAX_OPCODE_WORK, OPCODE_WORK_FACTOR * samples)
+    work = opcode_list_work(ops, height, width, planes)
+    if work > cap:
+        raise DngError(f"{where}: {len(ops)} opcodes touch {work} samples of the {width}x{height}x{planes} image; "
+                       f"expected at most {cap} ({OPCODE_WORK_FACTOR} passes over the image, or 2^28 samples)")

@@ -94,7 +94,9 @@ class CameraToXYZ(Stage):
         else:
             m = camera_to_xyz_d50(profile, neutral=neutral, use_forward_matrix=p.use_forward_matrix)
         if p.normalize:
-            m = normalise_white_luminance(m, neutral)
+            fm = p.use_forward_matrix and profile.has_forward_matrix
+            tag = ("ForwardMatrix1/ForwardMatrix2" if profile.dual else "ForwardMatrix1") if fm else profile._cm_tag()
+            m = normalise_white_luminance(m, neutral, src, tag)
         if gains is not None:
             m = m @ np.diag(1.0 / gains)
         return m

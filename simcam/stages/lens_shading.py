@@ -56,19 +56,66 @@ def opcode_image_bounds(meta: CameraMeta, shape: tuple[int, int]) -> tuple[int, 
 def _map_axis(pos: np.ndarray, size: int, origin: float, spacing: float, n: int):
     """Indices (i1, i2) and weights of the DNG SDK interpolator along one axis.
 
-    ``pos`` are pixel positions in the opcode image, ``size`` its extent.
+    ``pos`` are pixel positions in the opcode image, ``size`` its extent. The fractional map index
+    is clamped to the map (``0 .. n - 1``) before it becomes an integer, so a tiny spacing or a far
+    origin selects the edge points (as the SDK's interpolator does) instead of overflowing.
     """
     if n == 1:  # the SDK resets spacing/origin of a 1-point axis
         zeros = np.zeros(pos.shape, dtype=np.int64)
         return zeros, zeros, np.zeros(pos.shape, dtype=np.float64)
-    f = ((pos + 0.5) / size - origin) / spacing
-    i1 = np.floor(np.maximum(f, 0.0)).astype(np.int64)
-    frac = np.where(f <= 0.0, 0.0, f - i1)
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        f = ((pos + 0.5) / size - origin) / spacing
+    f = np.clip(np.nan_to_num(f, nan=0.0), 0.0, float(n - 1))
+    i1 = np.floor(f).astype(np.int64)
+    frac = f - i1
     top = i1 >= n - 1
     i1 = np.where(top, n - 1, i1)
     frac = np.where(top, 0.0, frac)
     i2 = np.minimum(i1 + 1, n - 1)
     return i1, i2, frac
+
+
+def _selection(start: int, stop: int, pitch: int, offset: int, n: int) -> slice | None:
+    """Frame indices ``i`` (``0 <= i < n``) whose opcode-image position ``p = i + offset`` is one of
+    ``start, start + pitch, ... < stop`` (an area spec's rows or columns, DNG 1.7.0.0 section 7), as a
+    slice; None when there is none. O(1): no per-pixel mask."""
+    pitch, start, stop = max(int(pitch), 1), int(start), int(stop)
+    lo, hi = max(start, offset), min(stop, offset + n)
+    first = start + -(-(lo - start) // pitch) * pitch
+    if first >= hi:
+        return None
+    return slice(first - offset, hi - offset, pitch)
+
+
+def gain_map_patch(gm: GainMap, meta: CameraMeta, shape: tuple[int, int], bounds=None):
+    """Rows and columns (slices of the frame) a GainMap touches and its gain there.
+
+    ``bounds`` is :func:`opcode_image_bounds` (computed once per list by callers with many maps).
+    Returns ``None`` when the map touches no pixel of the frame, else ``(rows, cols, gain)`` with
+    ``gain`` a float for a one-point map (a constant) or a float64 array (len(rows) x len(cols)),
+    bilinearly interpolated from map plane ``min(Plane, MapPlanes - 1)``.
+    """
+    h, w = shape
+    at, al, ih, iw = opcode_image_bounds(meta, shape) if bounds is None else bounds
+    oy, ox = meta.origin
+    rs = _selection(gm.top, gm.bottom, gm.row_pitch, int(oy) - at, h)
+    cs = _selection(gm.left, gm.right, gm.col_pitch, int(ox) - al, w)
+    if rs is None or cs is None:
+        return None
+    g = gm.gains
+    plane = min(int(gm.plane), g.shape[2] - 1)
+    nv, nh = int(g.shape[0]), int(g.shape[1])
+    if nv == 1 and nh == 1:
+        return rs, cs, float(g[0, 0, plane])
+    g = np.asarray(g[:, :, plane], dtype=np.float64)
+    y = np.arange(rs.start, rs.stop, rs.step, dtype=np.float64) + (int(oy) - at)
+    x = np.arange(cs.start, cs.stop, cs.step, dtype=np.float64) + (int(ox) - al)
+    i1, i2, fr = _map_axis(y, ih, gm.map_origin_v, gm.map_spacing_v, nv)
+    j1, j2, fc = _map_axis(x, iw, gm.map_origin_h, gm.map_spacing_h, nh)
+    # bilinear interpolation is separable: columns on the (few) map rows first, then rows
+    gc = g[:, j1] * (1.0 - fc) + g[:, j2] * fc  # (nv, len(cols))
+    fr = fr[:, None]
+    return rs, cs, gc[i1] * (1.0 - fr) + gc[i2] * fr
 
 
 def gain_map_selection(gm: GainMap, meta: CameraMeta, shape: tuple[int, int]):
@@ -81,25 +128,13 @@ def gain_map_selection(gm: GainMap, meta: CameraMeta, shape: tuple[int, int]):
     gain : ndarray, float64, shape (len(rows), len(cols))
         Bilinearly interpolated map value (plane ``min(Plane, MapPlanes-1)``).
     """
-    h, w = shape
-    at, al, ih, iw = opcode_image_bounds(meta, shape)
-    oy, ox = meta.origin
-    y = np.arange(h) + (oy - at)  # position of each frame row in the opcode image
-    x = np.arange(w) + (ox - al)
-    rp, cp = max(int(gm.row_pitch), 1), max(int(gm.col_pitch), 1)
-    rsel = (y >= gm.top) & (y < gm.bottom) & ((y - gm.top) % rp == 0)
-    csel = (x >= gm.left) & (x < gm.right) & ((x - gm.left) % cp == 0)
-    rows, cols = np.nonzero(rsel)[0], np.nonzero(csel)[0]
-    g = np.asarray(gm.gains, dtype=np.float64)
-    plane = min(int(gm.plane), g.shape[2] - 1)
-    g = g[:, :, plane]
-    nv, nh = g.shape
-    i1, i2, fr = _map_axis(y[rows].astype(np.float64), ih, gm.map_origin_v, gm.map_spacing_v, nv)
-    j1, j2, fc = _map_axis(x[cols].astype(np.float64), iw, gm.map_origin_h, gm.map_spacing_h, nh)
-    # bilinear interpolation is separable: columns on the (few) map rows first, then rows
-    gc = g[:, j1] * (1.0 - fc) + g[:, j2] * fc  # (nv, len(cols))
-    fr = fr[:, None]
-    return rows, cols, gc[i1] * (1.0 - fr) + gc[i2] * fr
+    patch = gain_map_patch(gm, meta, shape)
+    if patch is None:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty, np.zeros((0, 0))
+    rs, cs, gain = patch
+    rows, cols = np.arange(rs.start, rs.stop, rs.step), np.arange(cs.start, cs.stop, cs.step)
+    return rows, cols, np.broadcast_to(np.asarray(gain, dtype=np.float64), (rows.size, cols.size))
 
 
 def _as_slice(idx: np.ndarray, pitch: int) -> slice:
@@ -110,12 +145,14 @@ def _as_slice(idx: np.ndarray, pitch: int) -> slice:
 def gain_field(meta: CameraMeta, shape: tuple[int, int], list_index: int = 2) -> np.ndarray:
     """The total multiplicative gain (H x W, float32) of the mosaic GainMaps of an opcode list."""
     field = np.ones(shape, dtype=np.float64)
+    bounds = opcode_image_bounds(meta, shape)
     for gm in meta.gain_maps(list_index):
         if gm.plane != 0:  # a mosaic has a single plane (SDK: plane < buffer.Planes())
             continue
-        rows, cols, gain = gain_map_selection(gm, meta, shape)
-        if rows.size and cols.size:
-            field[_as_slice(rows, gm.row_pitch), _as_slice(cols, gm.col_pitch)] *= gain
+        patch = gain_map_patch(gm, meta, shape, bounds)
+        if patch is not None:
+            rs, cs, gain = patch
+            field[rs, cs] *= gain
     return field.astype(np.float32)
 
 
@@ -151,11 +188,13 @@ class LensShading(Stage):
             return frame.evolve(step=f"{self.type}(no GainMaps)")
         s = float(self.params.strength)
         out = np.array(frame.data, dtype=np.float32, copy=True)
+        bounds = opcode_image_bounds(frame.meta, out.shape)  # once: a file may hold thousands of maps
         for gm in maps:
-            rows, cols, gain = gain_map_selection(gm, frame.meta, out.shape)
-            if rows.size and cols.size:
-                g = (1.0 + s * (gain - 1.0)).astype(np.float32)
-                out[_as_slice(rows, gm.row_pitch), _as_slice(cols, gm.col_pitch)] *= g
+            patch = gain_map_patch(gm, frame.meta, out.shape, bounds)
+            if patch is not None:
+                rs, cs, gain = patch
+                out[rs, cs] *= np.float32(1.0 + s * (gain - 1.0)) if np.isscalar(gain) else \
+                    (1.0 + s * (gain - 1.0)).astype(np.float32)
         return frame.evolve(out, step=self.type)
 
     def _apply_sidd(self, frame: RawFrame) -> RawFrame:

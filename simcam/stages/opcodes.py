@@ -36,6 +36,8 @@ from .base import Stage, StageParams, register_stage
 
 _KIND = {1: "raw_dn", 2: "raw", 3: "camera_rgb"}
 _CODE = 65535.0
+#: Rows per band of :func:`warp_rectilinear` (its coordinate arrays stay in the cache).
+_WARP_BAND = 128
 
 
 def _planes(data: np.ndarray) -> np.ndarray:
@@ -83,6 +85,11 @@ def _green_parity(bayer_phase: int) -> int:
     return 0 if bayer_phase in (1, 2) else 1
 
 
+def _clamped(pos: np.ndarray, last: int, centre: float) -> np.ndarray:
+    """Source positions clamped to ``0 .. last`` (an overflow to +-inf clamps too; NaN takes the centre)."""
+    return np.clip(np.nan_to_num(pos, nan=centre, posinf=last, neginf=0.0), 0, last)
+
+
 def warp_rectilinear(rgb: np.ndarray, op: WarpRectilinear, *, order: int = 1) -> np.ndarray:
     """Undistort an (H, W, P) image as the DNG SDK's ``dng_filter_warp`` does (square pixels).
 
@@ -100,18 +107,22 @@ def warp_rectilinear(rgb: np.ndarray, op: WarpRectilinear, *, order: int = 1) ->
     c_v, c_h = cy * h, cx * w
     corners = np.array([[0, 0], [0, w], [h, 0], [h, w]], np.float64)
     radius = float(np.sqrt(((corners - [c_v, c_h]) ** 2).sum(1)).max())
-    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
-    uv, uh = (yy - c_v) / radius, (xx - c_h) / radius
-    r2 = np.minimum(uv * uv + uh * uh, 1.0)
+    uh = (np.arange(w, dtype=np.float64) - c_h) / radius
+    planes = [np.ascontiguousarray(img[:, :, p], dtype=np.float32) for p in range(n)]
     out = np.empty_like(img, dtype=np.float32)
-    for p in range(n):
-        kr0, kr1, kr2, kr3, kt0, kt1 = op.coefficients[min(p, op.coefficients.shape[0] - 1)]
-        ratio = kr0 + r2 * (kr1 + r2 * (kr2 + r2 * kr3))
-        tv = kt0 * (r2 + 2 * uv * uv) + 2 * kt1 * uh * uv
-        th = kt1 * (r2 + 2 * uh * uh) + 2 * kt0 * uh * uv
-        sv = np.clip(c_v + radius * (uv * ratio + tv), 0, h - 1)
-        sh = np.clip(c_h + radius * (uh * ratio + th), 0, w - 1)
-        out[:, :, p] = map_coordinates(img[:, :, p].astype(np.float32), [sv, sh], order=order, mode="nearest")
+    for r0 in range(0, h, _WARP_BAND):  # row bands: the same numbers, a fraction of the memory
+        r1 = min(h, r0 + _WARP_BAND)
+        uv = ((np.arange(r0, r1, dtype=np.float64) - c_v) / radius)[:, None]
+        r2 = np.minimum(uv * uv + uh * uh, 1.0)
+        for p in range(n):
+            kr0, kr1, kr2, kr3, kt0, kt1 = op.coefficients[min(p, op.coefficients.shape[0] - 1)]
+            with np.errstate(over="ignore", invalid="ignore"):  # absurd (finite) coefficients: clamped below
+                ratio = kr0 + r2 * (kr1 + r2 * (kr2 + r2 * kr3))
+                tv = kt0 * (r2 + 2 * uv * uv) + 2 * kt1 * uh * uv
+                th = kt1 * (r2 + 2 * uh * uh) + 2 * kt0 * uh * uv
+                sv = _clamped(c_v + radius * (uv * ratio + tv), h - 1, c_v)
+                sh = _clamped(c_h + radius * (uh * ratio + th), w - 1, c_h)
+            out[r0:r1, :, p] = map_coordinates(planes[p], [sv, sh], order=order, mode="nearest")
     return out[:, :, 0] if rgb.ndim == 2 else out
 
 
@@ -141,12 +152,15 @@ class Opcodes(Stage):
                              "place it where the DNG SDK applies it (see the stage's documentation)")
         data = np.array(frame.data, dtype=np.float32, copy=True)
         meta = meta.copy()
+        geometry = None  # where the GainMaps sit: computed once, a list may hold thousands of them
         for k, op in enumerate(ops):
             name = OPCODE_NAMES.get(op.id, f"id {op.id}")
             where = f"{src}: OpcodeList{n}[{k}]"
             if op.id == 9:
                 if n != 2 or self.params.gain_maps:
-                    data = self._gain_map(data, frame, op, n)
+                    if geometry is None or geometry[2] != data.shape[:2]:
+                        geometry = self._gain_map_geometry(frame, data.shape[:2], n)
+                    data = self._gain_map(data, op, geometry)
                 continue
             params = decode_opcode(op.id, op.payload, where=where)
             if params is None:
@@ -163,21 +177,31 @@ class Opcodes(Stage):
         raise StageError(f"{where}: {name} (id {op.id}) cannot be applied by simcam and its Optional flag is clear; "
                          "expected an opcode simcam implements (a reader must not skip a non-optional opcode)")
 
-    def _gain_map(self, data: np.ndarray, frame: RawFrame, op, n: int) -> np.ndarray:
-        from .lens_shading import _as_slice, gain_map_selection
+    @staticmethod
+    def _gain_map_geometry(frame: RawFrame, shape: tuple[int, int], n: int):
+        """(metadata, opcode-image bounds, shape) placing the GainMaps of list ``n`` on a ``shape`` image."""
+        from .lens_shading import opcode_image_bounds
 
-        gm = op.parsed
         meta = frame.meta
         if n == 1:  # OpcodeList1 addresses the whole stored image
             extra = dict(meta.extra) if isinstance(meta.extra, dict) else {}
-            extra["image_size"] = (frame.height, frame.width)
+            extra["image_size"] = tuple(shape)
             meta = meta.replace(active_area=None, extra=extra, origin=(0, 0))
+        return meta, opcode_image_bounds(meta, shape), tuple(shape)
+
+    @staticmethod
+    def _gain_map(data: np.ndarray, op, geometry) -> np.ndarray:
+        from .lens_shading import gain_map_patch
+
+        gm = op.parsed
+        meta, bounds, shape = geometry
         img = _planes(data)
-        rows, cols, gain = gain_map_selection(gm, meta, data.shape[:2])
-        if rows.size and cols.size:
+        patch = gain_map_patch(gm, meta, shape, bounds)
+        if patch is not None:
+            rs, cs, gain = patch
+            gain = np.float64(gain) if np.isscalar(gain) else gain  # float64 product, as for a map of many points
             for p in range(int(gm.plane), min(int(gm.plane) + max(int(gm.planes), 1), img.shape[2])):
-                sl = (_as_slice(rows, gm.row_pitch), _as_slice(cols, gm.col_pitch), p)
-                img[sl] = (img[sl] * gain).astype(np.float32)
+                img[rs, cs, p] = (img[rs, cs, p] * gain).astype(np.float32)
         return data
 
     def _apply_one(self, data, meta, kind, op, n: int, where: str):

@@ -8,6 +8,7 @@ Values"): linearization table, then black level per CFA site, then division by
 
 from __future__ import annotations
 
+import math
 from typing import Literal, Optional
 
 import numpy as np
@@ -42,6 +43,17 @@ def _int_rect(values, what: str, source: str) -> tuple[int, int, int, int]:
     if len(vals) != 4:
         raise StageError(f"{source}: {what}: expected [top, left, bottom, right], got {values!r}")
     return tuple(int(round(v)) for v in vals)  # type: ignore[return-value]
+
+
+def _finite_pair(values, tag: str, source: str) -> tuple[float, float]:
+    """A DNG (x, y) pair as two finite floats, or a StageError naming the file and the tag."""
+    try:
+        x, y = (float(v) for v in values)
+    except (TypeError, ValueError):
+        raise StageError(f"{source or 'frame'}: {tag}: {values!r}; expected two numbers (x, y)") from None
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise StageError(f"{source or 'frame'}: {tag}: ({x}, {y}); expected finite numbers")
+    return x, y
 
 
 @register_stage
@@ -85,8 +97,8 @@ class Crop(Stage):
                 return (0, 0, frame.height, frame.width)
             t, l, b, r = meta.active_area
             return (t - oy, l - ox, b - oy, r - ox)
-        x0, y0 = meta.default_crop_origin
-        cw, ch = meta.default_crop_size
+        x0, y0 = _finite_pair(meta.default_crop_origin, "DefaultCropOrigin", meta.source)
+        cw, ch = _finite_pair(meta.default_crop_size, "DefaultCropSize", meta.source)
         top, left = int(round(at + y0 - oy)), int(round(al + x0 - ox))
         return (top, left, top + int(round(ch)), left + int(round(cw)))
 

@@ -37,6 +37,7 @@ STAGE_CASES: dict[str, tuple[dict, str]] = {
     "clip_raw": ({}, "raw"),
     "highlights": ({"method": "propagate"}, "raw"),
     "opcodes": ({"list": 2}, "raw"),
+    "dcp": ({"exposure": 0.5}, "camera_rgb"),
 }
 
 
