@@ -775,8 +775,13 @@ def _decode_pixels(path: Path, meta: CameraMeta, h: int, w: int) -> np.ndarray:
     """
     import rawpy
 
+    import warnings
+
     unsupported, error = False, None
-    with _Fd2Capture() as cap:
+    # Python warnings raised by rawpy itself (e.g. its note on fork-started processes) are about the
+    # environment, not this file: recorded and dropped, so only what LibRaw's C code writes to fd 2 counts.
+    with _Fd2Capture() as cap, warnings.catch_warnings(record=True):
+        warnings.simplefilter("always")
         try:
             with rawpy.imread(str(path)) as raw:
                 data = np.array(raw.raw_image, dtype=np.float32, copy=True)  # copy inside the with block

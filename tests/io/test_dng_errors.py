@@ -137,3 +137,23 @@ def test_cli_info_good_file(make_dng, capsys):  # noqa: F811
     assert main(["info", str(path)]) == 0
     out = capsys.readouterr().out
     assert "cfa: \"GBRG\"" in out and "noise_profile" in out
+
+
+def test_a_python_warning_inside_rawpy_is_not_read_as_a_libraw_error(make_dng):  # noqa: F811
+    """rawpy warns (a Python RuntimeWarning on stderr) when used in a fork-started process, as in a
+    multiprocessing.Pool: that is about the process, not the file, so the file still reads. Run in a
+    subprocess so the warning reaches the real stderr (pytest would record it)."""
+    path = make_dng("warned.dng", 64, 64)  # large enough for LibRaw (not the tiny-file fallback)
+    code = (
+        "import sys, warnings, rawpy\n"
+        "from simcam.io.dng import read_dng\n"
+        "orig = rawpy.imread\n"
+        "def imread(*a, **k):\n"
+        "    warnings.warn('rawpy is being used in a process created by multiprocessing', RuntimeWarning)\n"
+        "    return orig(*a, **k)\n"
+        "rawpy.imread = imread\n"
+        f"print(read_dng({str(path)!r}).data.shape)\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "(64, 64)" and r.stderr == ""
