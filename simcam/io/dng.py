@@ -766,6 +766,19 @@ def read_dng(path: str | os.PathLike) -> RawFrame:
     return RawFrame(data=data, meta=meta, kind="raw_dn", history=[f"read_dng({path.name})"])
 
 
+def _quiet_rawpy_fork_warning() -> None:
+    """Silence rawpy's RuntimeWarning about fork-started processes (multiprocessing.Pool workers).
+
+    It is about the process, not the file, and Python prints it to fd 2, where :class:`_Fd2Capture`
+    would read it as LibRaw's report of corrupt data. A process-wide filter for that one message
+    (not ``warnings.catch_warnings``, whose save/restore of global state is not thread-safe).
+    """
+    import warnings
+
+    warnings.filterwarnings("ignore", message="rawpy is being used in a process created by multiprocessing",
+                            category=RuntimeWarning)
+
+
 def _decode_pixels(path: Path, meta: CameraMeta, h: int, w: int) -> np.ndarray:
     """LibRaw's ``raw_image`` as float32, its stderr captured (:class:`_Fd2Capture`).
 
@@ -775,13 +788,9 @@ def _decode_pixels(path: Path, meta: CameraMeta, h: int, w: int) -> np.ndarray:
     """
     import rawpy
 
-    import warnings
-
+    _quiet_rawpy_fork_warning()
     unsupported, error = False, None
-    # Python warnings raised by rawpy itself (e.g. its note on fork-started processes) are about the
-    # environment, not this file: recorded and dropped, so only what LibRaw's C code writes to fd 2 counts.
-    with _Fd2Capture() as cap, warnings.catch_warnings(record=True):
-        warnings.simplefilter("always")
+    with _Fd2Capture() as cap:
         try:
             with rawpy.imread(str(path)) as raw:
                 data = np.array(raw.raw_image, dtype=np.float32, copy=True)  # copy inside the with block
