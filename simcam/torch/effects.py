@@ -112,7 +112,16 @@ def black_level_offset(group: Group, x, ctx: Ctx, st: EffectState):
 
 
 def hot_pixels(group: Group, x, ctx: Ctx, st: EffectState):
-    return torch.where(st.fixed("set_mask"), st.fixed("set_value"), x + st.fixed("add"))
+    """Hot pixels add their offset; with ``hot_electron`` the offset is dark charge, drawn each frame as
+    ``hot_electron * Poisson(offset / hot_electron)`` (as the numpy effect); stuck and dead pixels are set."""
+    add = st.fixed("add")
+    if any(getattr(e, "hot_electron", None) is not None for e in group.uniq):
+        el = ctx.scalar(group, lambda e: e.hot_electron or 0.0, dtype=torch.float64)
+        safe = torch.where(el > 0, el, torch.ones_like(el))
+        lam = (add.double() / safe).expand(x.shape[0], *add.shape[1:]).expand_as(x).contiguous()
+        drawn = (safe * torch.poisson(lam, generator=ctx.generator)).to(x.dtype)
+        add = torch.where(el > 0, drawn, add.to(x.dtype).expand_as(x))
+    return torch.where(st.fixed("set_mask"), st.fixed("set_value"), x + add)
 
 
 def tukey_lambda_ppf(u: torch.Tensor, lam: torch.Tensor) -> torch.Tensor:
