@@ -38,6 +38,7 @@ if __package__ in (None, ""):  # run as a script: make the repository importable
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
     sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from machine import cpu_model  # noqa: E402
 from render import write_synthetic_dng  # noqa: E402  (benchmarks/render.py)
 
 from simcam.batch import BatchConfig, Task, run_batch  # noqa: E402
@@ -48,14 +49,6 @@ PROFILE = REPO / "profiles" / "sidd-gp.yaml"
 CONFIGS = ("for loop", "Pool(1)", "Pool(2)", "dask 1", "dask 2")
 
 
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def _call(job_task):

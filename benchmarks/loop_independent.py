@@ -29,7 +29,6 @@ from __future__ import annotations
 import argparse
 import fnmatch
 import json
-import platform
 import sys
 import tempfile
 import time
@@ -38,6 +37,8 @@ from pathlib import Path
 
 if __package__ in (None, ""):  # run as a script: the repository root makes ``tests.indepsim`` importable
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/machine.py, also when loaded by path
+from machine import cpu_model  # noqa: E402
 
 #: the loop's named effects (what it may add); anything else in a truth manifest is outside the vocabulary
 VOCABULARY = ("row_noise", "column_fpn", "dsnu", "prnu", "hot_pixels", "heavy_tail_read", "quantization",
@@ -45,14 +46,6 @@ VOCABULARY = ("row_noise", "column_fpn", "dsnu", "prnu", "hot_pixels", "heavy_ta
               "channel_gain", "dark_current")
 
 
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def judge(truth_effects: set[str], report: dict) -> dict:

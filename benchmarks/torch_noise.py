@@ -34,20 +34,15 @@ import torch
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/machine.py, also when loaded by path
+from machine import cpu_model  # noqa: E402
+
 from simcam.noise import model_from_entry  # noqa: E402
 from simcam.noise.kernels.nlf import nlf_noise  # noqa: E402
 from simcam.profiles.schema import load_profile  # noqa: E402
 from simcam.torch import add_noise  # noqa: E402
 
 
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return "unknown"
 
 
 def timed(fn, repeats: int, sync=None) -> float:
