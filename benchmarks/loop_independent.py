@@ -11,7 +11,7 @@ are not looked at while the loop is developed, and this script reports them sepa
 For every case the loop runs with its defaults; the script compares the effects it added (union over
 the ISOs) with the generator's truth:
 
-* effects of the loop's vocabulary (``VOCABULARY`` below) must be named; nothing else may be named
+* effects of the loop's vocabulary (its effect cards, ``VOCABULARY`` below) must be named; nothing else may be named
   (a *wrong* addition: a named effect that is not in the truth);
 * an effect outside the vocabulary (``dark_current``, ``rtn``, ``undeclared_*``, ...) must not be forced
   into a named one: it may be ``unexplained``, an ``empirical_*`` component, or nothing;
@@ -40,10 +40,11 @@ if __package__ in (None, ""):  # run as a script: the repository root makes ``te
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/machine.py, also when loaded by path
 from machine import cpu_model  # noqa: E402
 
-#: the loop's named effects (what it may add); anything else in a truth manifest is outside the vocabulary
-VOCABULARY = ("row_noise", "column_fpn", "dsnu", "prnu", "hot_pixels", "heavy_tail_read", "quantization",
-              "spatial_correlation", "periodic_pattern", "black_level_offset", "frame_flicker", "nonlinearity",
-              "channel_gain", "dark_current")
+from simcam.calibration.effects import CARDS  # noqa: E402
+
+#: the loop's named effects (its effect cards: what it may add); anything else in a truth manifest is
+#: outside the vocabulary
+VOCABULARY = tuple(CARDS)
 
 
 
