@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 
 import pytest
-from shared_data import REPO, SHARED_DATA, shared_path  # noqa: F401  (re-exported for fixtures)
+from shared_data import shared_path
 
 
 @pytest.fixture

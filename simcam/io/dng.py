@@ -20,6 +20,7 @@ and LibRaw's messages on stderr are captured (folded into the error, never print
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import math
 import os
@@ -766,12 +767,14 @@ def read_dng(path: str | os.PathLike) -> RawFrame:
     return RawFrame(data=data, meta=meta, kind="raw_dn", history=[f"read_dng({path.name})"])
 
 
+@functools.cache
 def _quiet_rawpy_fork_warning() -> None:
     """Silence rawpy's RuntimeWarning about fork-started processes (multiprocessing.Pool workers).
 
     It is about the process, not the file, and Python prints it to fd 2, where :class:`_Fd2Capture`
     would read it as LibRaw's report of corrupt data. A process-wide filter for that one message
-    (not ``warnings.catch_warnings``, whose save/restore of global state is not thread-safe).
+    (not ``warnings.catch_warnings``, whose save/restore of global state is not thread-safe),
+    installed once per process.
     """
     import warnings
 

@@ -71,7 +71,7 @@ def test_graph_rules_and_metadata(small_onnx):
 def test_golden_vectors_through_onnx(published_onnx, published_onnx_legacy):
     """All 8 cases; case 7 (ISO 200, not one of the released five) needs the export made with
     --legacy-iso, which reproduces the released code's factor-1 fallback."""
-    from tests.conftest import shared_path
+    from shared_data import shared_path
 
     g = np.load(shared_path("noiseflow/golden.npz"))
     default = NoiseFlowRuntime(published_onnx[0], threads=1)

@@ -15,7 +15,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from flow_helpers import nhwc_latent_to_nchw, nhwc_released_to_nchw, published_flow  # noqa: E402,F401  (helpers, fixtures)
-from tests.conftest import shared_path  # noqa: E402
+from shared_data import shared_path  # noqa: E402
 
 pytestmark = pytest.mark.shared_data
 
