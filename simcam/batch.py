@@ -33,9 +33,10 @@ from typing import Any, Callable, Sequence
 
 from .errors import OptionalDependencyError, SimcamError
 
-#: Environment variables that cap the threads of numba, OpenMP, BLAS and onnxruntime in a worker.
-THREAD_VARIABLES = ("OMP_NUM_THREADS", "NUMBA_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS",
-                    "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
+#: Environment variables that cap the threads of simcam's row bands (:mod:`simcam.parallel`), numba,
+#: OpenMP, BLAS and onnxruntime in a worker.
+THREAD_VARIABLES = ("SIMCAM_THREADS", "OMP_NUM_THREADS", "NUMBA_NUM_THREADS", "MKL_NUM_THREADS",
+                    "OPENBLAS_NUM_THREADS", "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
 
 
 @dataclass(frozen=True)
@@ -154,7 +155,13 @@ def _client(config: BatchConfig):
     except ImportError as exc:
         raise OptionalDependencyError(
             f"dask.distributed is needed for batch jobs: pip install 'simcam[batch]' ({exc})") from None
-    dask.config.set({"distributed.worker.daemon": False, "logging.distributed": "error"})
+    # dask's nanny exports MALLOC_TRIM_THRESHOLD_=65536 to its workers by default. Setting any malloc
+    # threshold turns off glibc's dynamic mmap threshold, so every temporary over 128 KiB (an image
+    # band) is a fresh mmap that faults in page by page: 22,000 page faults per 12 MP render instead of
+    # 3,000 and 15-25 % more time per item than the same code in a plain process (benchmarks/batch.py).
+    # None unsets it (the workers then manage memory as any Python process does).
+    dask.config.set({"distributed.worker.daemon": False, "logging.distributed": "error",
+                     "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None})
     for name in ("distributed", "distributed.scheduler", "distributed.nanny", "distributed.worker"):
         logging.getLogger(name).setLevel(logging.ERROR)
     address = config.scheduler_address()

@@ -79,7 +79,7 @@ def synth_patches_job(payload: dict) -> dict:
     import zarr
 
     from .cfa import pack
-    from .training.patches import crop_origin
+    from .training.crops import crop_origin
     from .synth import load_clean
     from .profiles.schema import load_profile
     from .stages.noise import Noise

@@ -148,3 +148,24 @@ def test_bench_images_x_denoisers_on_two_workers_equals_the_serial_scores(tmp_pa
         assert x["denoiser"] == y["denoiser"] and x["raw"] == y["raw"]
         strip = [{k: v for k, v in blk.items() if k != "seconds"} for blk in x["per_block"]]
         assert strip == [{k: v for k, v in blk.items() if k != "seconds"} for blk in y["per_block"]]
+
+
+def test_local_cluster_workers_run_with_one_thread_and_glibc_malloc_defaults():
+    """Workers cap simcam's own row bands (SIMCAM_THREADS) like numba/BLAS/OpenMP, and do not inherit
+    dask's MALLOC_TRIM_THRESHOLD_ (it turns off glibc's dynamic mmap threshold: every image band
+    becomes a fresh mmap, ~7x the page faults per render)."""
+    import os
+
+    from simcam.batch import THREAD_VARIABLES, BatchConfig, Task, run_batch
+    from simcam.parallel import threads
+
+    def environment(names):  # pickled by value (a local function) to the workers
+        return {"env": {n: os.environ.get(n) for n in names}, "threads": threads()}
+
+    names = [*THREAD_VARIABLES, "MALLOC_TRIM_THRESHOLD_"]
+    out = run_batch(environment, [Task("a", names)], BatchConfig(workers=1, progress=False), echo=lambda s: None)
+    assert out[0].ok, out[0].error
+    env = out[0].info["env"]
+    assert {n: env[n] for n in THREAD_VARIABLES} == {n: "1" for n in THREAD_VARIABLES}
+    assert out[0].info["threads"] == 1
+    assert env["MALLOC_TRIM_THRESHOLD_"] is None or "MALLOC_TRIM_THRESHOLD_" in os.environ

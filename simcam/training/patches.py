@@ -29,6 +29,7 @@ import numpy as np
 from ..cfa import PACK_OFFSETS, check_pattern, pack, shift_pattern
 from ..errors import DatasetError, require_extra
 from ..frame import RawFrame
+from .crops import crop_origin
 from .loader import PatchBatch, ThreadLoader, collate_patches
 from .unprocess import Unprocess
 
@@ -104,23 +105,6 @@ def as_sources(items: Sequence[Any], cfa: str = "RGGB") -> list[Source]:
 
 
 # ------------------------------------------------------------------------------- sample maker
-def crop_origin(rng: np.random.Generator, shape: tuple[int, int], p2: int, cfa: str, cfa_out: str | None,
-                where: Any = "source") -> tuple[int, int]:
-    """Random (top, left) of a ``p2`` x ``p2`` mosaic crop whose pattern becomes ``cfa_out``."""
-    h, w = shape
-    oy, ox = 0, 0
-    if cfa_out:
-        cands = [(a, b) for a in (0, 1) for b in (0, 1) if shift_pattern(cfa, a, b) == cfa_out]
-        if not cands:
-            raise DatasetError(f"{where}: CFA {cfa} cannot be cropped to {cfa_out}")
-        oy, ox = cands[0]
-    if h - oy < p2 or w - ox < p2:
-        raise DatasetError(f"{where}: {h}x{w} mosaic is smaller than a {p2}x{p2} patch")
-    top = oy + 2 * int(rng.integers((h - oy - p2) // 2 + 1))
-    left = ox + 2 * int(rng.integers((w - ox - p2) // 2 + 1))
-    return top, left
-
-
 class PatchMaker:
     """Deterministic sample factory shared by the map-style and iterable datasets."""
 

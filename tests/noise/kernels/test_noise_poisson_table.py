@@ -99,6 +99,10 @@ def test_gaussian_part_is_standard_normal():
 def test_ziggurat_constants():
     # Marsaglia & Tsang (2000), 256 layers: R = 3.6541528853610088
     assert abs(ZIG_R - 3.6541528853610088) < 1e-12
+    # the stated root is exactly what Brent's method finds (the tables, and so every draw, depend on it)
+    from simcam.noise.kernels.poisson import _zig_solve
+
+    assert _zig_solve() == ZIG_R
     x = ZIG_W * 2.0**52  # X_0 .. X_255
     x = np.append(x, 0.0)
     v = x[1:-1] * (ZIG_F[2:] - ZIG_F[1:-1])  # areas of layers 1..255
