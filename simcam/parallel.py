@@ -32,3 +32,16 @@ def run_bands(h: int, fn, rows: int = 16) -> bool:
         return any([fn(a, b) for a, b in bands])  # noqa: C419 (a list: every band must run)
     with ThreadPoolExecutor(n) as ex:
         return any(list(ex.map(lambda ab: fn(*ab), bands)))
+
+
+def map_threads(fn, items: list) -> list:
+    """``[fn(x) for x in items]`` on :func:`threads` threads, results in the order of ``items``.
+
+    For independent items that write only their own outputs (as row bands do), so the results are
+    the same bytes whatever the number of threads.
+    """
+    n = min(threads(), len(items))
+    if n <= 1:
+        return [fn(x) for x in items]
+    with ThreadPoolExecutor(n) as ex:
+        return list(ex.map(fn, items))

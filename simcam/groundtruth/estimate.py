@@ -22,6 +22,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from ..errors import DatasetError
+from ..parallel import map_threads, run_bands
 from .alignment import (ALIGN_MODES, constant_field, dense_field, field_stats, global_shift, local_shifts,
                         prepare_reference, reject_outliers, warp)
 from .burst import Burst
@@ -339,10 +340,10 @@ def _run(burst, cfg, store, shape, cfa, lo, hi, dmap, dmask, timing, t0, progres
     if cfg.alignment != "none":
         reference = prepare_reference(ref_img, cfa, patch=cfg.patch, stride=cfg.stride, upsample=cfg.upsample,
                                       normalization=cfg.normalization)
-    per_frame = []
     censor = cfg.method != "mean"
     bar = _bar(progress, kept.size, "gt: align")
-    for i in kept:
+
+    def align_frame(i) -> dict:  # frame i only (its own slot of the store): frames run on threads
         raw = store.get(i)
         x = align_intensity(raw, means[i], mu_a, cfg.intensity)
         nan = np.isnan(x)
@@ -373,7 +374,6 @@ def _run(burst, cfg, store, shape, cfa, lo, hi, dmap, dmask, timing, t0, progres
                 x = warp(x, fieldmap, cfa, order=cfg.interp_order)
             else:
                 fieldmap = None
-        per_frame.append(info)
         if censor:
             low = raw <= lo + _EPS
             high = raw >= hi - _EPS
@@ -390,6 +390,9 @@ def _run(burst, cfg, store, shape, cfa, lo, hi, dmap, dmask, timing, t0, progres
             x[nan] = np.nan
         store.put(i, x)
         _tick(bar)
+        return info
+
+    per_frame = map_threads(align_frame, [int(i) for i in kept])
     _close(bar)
     timing["align"] = time.perf_counter() - t
 
@@ -416,10 +419,9 @@ def _run(burst, cfg, store, shape, cfa, lo, hi, dmap, dmask, timing, t0, progres
             kw["nlf"] = nlf_used
     # censored samples are marked +-inf above, so the clip points themselves only matter for MLE
     flo, fhi = (lo, hi)
-    tiles = list(range(0, H, rows))
-    bar = _bar(progress, len(tiles), "gt: robust mean")
-    for r0 in tiles:
-        r1 = min(H, r0 + rows)
+    bar = _bar(progress, len(range(0, H, rows)), "gt: robust mean")
+
+    def tile(r0: int, r1: int) -> None:  # rows r0:r1 only: tiles run on threads, same bytes for any count
         block = store.rows(kept, r0, r1).reshape(kept.size, -1)
         res = robust_mean(block, cfg.method, lo=flo, hi=fhi, **kw)
         gt[r0:r1] = res.mu.reshape(r1 - r0, W)
@@ -428,6 +430,9 @@ def _run(burst, cfg, store, shape, cfa, lo, hi, dmap, dmask, timing, t0, progres
         n_used[r0:r1] = res.n_used.reshape(r1 - r0, W)
         n_cens[r0:r1] = (res.n_low + res.n_high).reshape(r1 - r0, W)
         _tick(bar)
+
+    with threadpool_limits(limits=1, user_api="blas"):  # the tiles are the parallelism
+        run_bands(H, tile, rows=rows)
     _close(bar)
     timing["robust_mean"] = time.perf_counter() - t
     timing["total"] = time.perf_counter() - t0
