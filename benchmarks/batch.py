@@ -6,14 +6,16 @@ Three jobs, each run five ways in the same process tree, one after the other:
   ``simcam.jobs``, no batch layer);
 * ``Pool(1)`` / ``Pool(2)``: ``multiprocessing.Pool.map`` over the same items;
 * ``dask 1`` / ``dask 2``: ``simcam.batch.run_batch`` on a LocalCluster of 1 / 2 worker
-  processes (one thread each, numba/BLAS/OpenMP limited to one thread).
+  processes (one thread each: simcam's row bands, numba, BLAS and OpenMP limited to one thread).
 
 Jobs: ``render`` (N renders of a synthetic 12 MP DNG -> 8-bit PNG, pipeline srgb), ``synth``
 (a training set of P noisy/clean patches, packed 4 x 32 x 32, from 1 MP clean DNGs, into Zarr),
 ``gt`` (ground truth of B bursts of 16 frames of 1 MP). Every configuration writes fresh
 outputs; the outputs of all five are checked byte-identical (PNG, Zarr chunks, npz).
 Prints the CPU model, thread settings and load average, wall times, the speed-up of 2 workers
-over 1, and the peak RSS of a worker.
+over 1, the fixed cost of the dask runs (wall time of ``dask 1`` minus its items' own seconds:
+starting and closing the LocalCluster; a worker's first imports count in its first item), and the
+peak RSS of a worker.
 
 Usage::
 
@@ -60,23 +62,23 @@ def _call(job_task):
     return time.perf_counter() - t0, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def run_config(name: str, job, tasks: list[Task]) -> tuple[float, float]:
-    """Wall seconds and the peak RSS (MiB) of a process that ran items."""
+def run_config(name: str, job, tasks: list[Task]) -> tuple[float, float, float]:
+    """Wall seconds, the peak RSS (MiB) of a process that ran items, and the items' own seconds summed."""
     t0 = time.perf_counter()
     if name == "for loop":
-        rss = max(_call((job, t))[1] for t in tasks)
+        res = [_call((job, t)) for t in tasks]
     elif name.startswith("Pool"):
         n = int(name[5])
         with multiprocessing.get_context("fork").Pool(n, initializer=_one_thread) as pool:
-            rss = max(r[1] for r in pool.map(_call, [(job, t) for t in tasks], chunksize=1))
+            res = pool.map(_call, [(job, t) for t in tasks], chunksize=1)
     else:
         n = int(name.split()[1])
         out = run_batch(job, tasks, BatchConfig(workers=n, progress=False), label=name, echo=lambda s: None)
         bad = [o for o in out if not o.ok]
         if bad:
             raise RuntimeError(f"{name}: {bad[0].key}: {bad[0].error}")
-        rss = max(o.info.get("peak_rss_mib", 0.0) for o in out)
-    return time.perf_counter() - t0, rss
+        res = [(o.seconds, o.info.get("peak_rss_mib", 0.0)) for o in out]
+    return time.perf_counter() - t0, max(r[1] for r in res), sum(r[0] for r in res)
 
 
 def _one_thread():
@@ -118,8 +120,8 @@ def main(argv=None) -> int:
     work.mkdir(parents=True, exist_ok=True)
     print(f"CPU: {cpu_model()} ({os.cpu_count()} logical cores); Python {platform.python_version()}; "
           f"load average {os.getloadavg()[0]:.2f} at start")
-    print("Threads: every worker and Pool process 1 thread (OMP/NUMBA/MKL/OPENBLAS_NUM_THREADS=1); "
-          "the for loop runs with the process defaults")
+    print("Threads: every worker and Pool process 1 thread (SIMCAM_THREADS and OMP/NUMBA/MKL/OPENBLAS_NUM_THREADS=1); "
+          "the for loop runs with the process defaults (simcam's row bands on every core)")
     rows = []
     jobs = args.jobs.split(",")
     if "render" in jobs:
@@ -180,13 +182,13 @@ def main(argv=None) -> int:
                           lambda out: [out]))
     print()
     print("| job | items | " + " | ".join(f"{c} s" for c in CONFIGS) + " | dask 2 vs 1 | dask 2 vs for loop | "
-          "dask 2 vs Pool(2) | peak RSS / worker |")
-    print("|---|---|" + "---:|" * (len(CONFIGS) + 4))
+          "dask 2 vs Pool(2) | dask 1 fixed cost s | peak RSS / worker |")
+    print("|---|---|" + "---:|" * (len(CONFIGS) + 5))
     for r in rows:
         t = r["times"]
         print(f"| {r['job']} | {r['what']} | " + " | ".join(f"{t[c]:.1f}" for c in CONFIGS)
               + f" | **{t['dask 1'] / t['dask 2']:.2f}x** | {t['for loop'] / t['dask 2']:.2f}x | "
-              f"{t['Pool(2)'] / t['dask 2']:.2f}x | {r['rss']:.0f} MiB |")
+              f"{t['Pool(2)'] / t['dask 2']:.2f}x | {t['dask 1'] - r['items']['dask 1']:.1f} | {r['rss']:.0f} MiB |")
     print(f"\nload average {os.getloadavg()[0]:.2f} at the end; outputs byte-identical across the five "
           f"configurations: {all(r['same'] for r in rows)}")
     if not args.workdir:
@@ -195,22 +197,22 @@ def main(argv=None) -> int:
 
 
 def bench(job_name, what, job, work: Path, make_tasks, outputs) -> dict:
-    times, digests, rss = {}, {}, 0.0
+    times, items, digests, rss = {}, {}, {}, 0.0
     for c in CONFIGS:
         out = work / f"{job_name}_out" / c.replace(" ", "_").replace("(", "").replace(")", "")
         shutil.rmtree(out, ignore_errors=True)
         out.mkdir(parents=True)
         tasks = make_tasks(out)
-        times[c], r = run_config(c, job, tasks)
+        times[c], r, items[c] = run_config(c, job, tasks)
         if c.startswith("dask"):
             rss = max(rss, r)
         digests[c] = digest(outputs(out))
-        print(f"{job_name}: {c}: {times[c]:.2f} s", flush=True)
+        print(f"{job_name}: {c}: {times[c]:.2f} s (the items themselves: {items[c]:.2f} s summed)", flush=True)
         shutil.rmtree(out, ignore_errors=True)
     same = len(set(digests.values())) == 1
     if not same:
         print(f"{job_name}: outputs differ between configurations: {digests}")
-    return {"job": job_name, "what": what, "times": times, "rss": rss, "same": same}
+    return {"job": job_name, "what": what, "times": times, "items": items, "rss": rss, "same": same}
 
 
 if __name__ == "__main__":
