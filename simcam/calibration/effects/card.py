@@ -34,10 +34,19 @@ from typing import Any, ClassVar
 import numpy as np
 
 
-def quantity(unit: str, doc: str, *, scale: float | None = 1.0, default: Any = MISSING):
+def quantity(unit: str, doc: str, *, scale: float | None = 1.0, default: Any = MISSING,
+             profile: str | None = None, per_full_scale: bool = False, profile_default: Any = MISSING):
     """A parameter field: ``doc`` says what it is, ``unit`` is the unit the report shows it in and
-    ``scale`` the factor from the stored value to that unit (None: shown as it is, e.g. a name)."""
-    meta = {"unit": unit, "scale": scale, "doc": doc}
+    ``scale`` the factor from the stored value to that unit (None: shown as it is, e.g. a name).
+
+    ``profile``: the key of the field in the noise stage's effect entry, when the card's default
+    conversion (:class:`DeclaredProfileCard`) writes it there;
+    ``per_full_scale``: the entry holds it on normalised raw, ``value / (white - black)`` (the field
+    is in DN); ``profile_default``: the value read where an entry lacks the key (else a KeyError).
+    A ``list`` field is one value per 2x2 site (an entry's scalar is broadcast to the four sites).
+    """
+    meta = {"unit": unit, "scale": scale, "doc": doc, "profile": profile, "per_full_scale": per_full_scale,
+            "profile_default": profile_default}
     return field(metadata=meta) if default is MISSING else field(default=default, metadata=meta)
 
 
@@ -53,7 +62,13 @@ class EffectParams(Mapping):
 
     They also read as a mapping field -> value (optional fields that are None left out), the
     loop's former dicts: :meth:`to_dict` is what ``loop_model.yaml`` and ``report.json`` hold.
+    A subclass declares its fields with :func:`quantity` and is made a frozen dataclass on its
+    definition (no decorator).
     """
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        dataclass(frozen=True)(cls)
 
     @classmethod
     def from_dict(cls, values: Mapping) -> EffectParams:
@@ -169,6 +184,17 @@ class EffectCard:
     refit_on_change: ClassVar[bool] = False
     #: the parameter whose zero makes the effect the identity (:meth:`is_null`; None: no such parameter)
     null_field: ClassVar[str | None] = None
+    #: the value of ``null_field`` that makes the effect the identity
+    null_value: ClassVar[float] = 0.0
+
+    def __init_subclass__(cls, **attrs):
+        """A card declares its class attributes as keywords of its class statement
+        (``class RowNoiseCard(OffsetSigmaCard, name="row_noise", params=RowNoise, ...)``)."""
+        super().__init_subclass__()
+        for key, value in attrs.items():
+            if key not in EffectCard.__annotations__:
+                raise TypeError(f"effect card {cls.__name__}: unknown attribute {key!r}")
+            setattr(cls, key, value)
 
     def fit(self, d, model, ctx: FitContext) -> EffectParams | Fit:
         """Parameters fitted on the capture ``d`` (``CaptureData``) given the current ``model``."""
@@ -205,8 +231,12 @@ class EffectCard:
         return None
 
     def is_null(self, p: EffectParams) -> bool:
-        """True when the fitted effect is the identity (nothing to add): its ``null_field`` is zero."""
-        return self.null_field is not None and abs(float(getattr(p, self.null_field))) < 1e-9
+        """True when the fitted effect is the identity (nothing to add): its ``null_field`` is
+        ``null_value`` (within 1e-9; a per-site list: at every site)."""
+        if self.null_field is None:
+            return False
+        v = getattr(p, self.null_field)
+        return max(abs(float(x) - self.null_value) for x in (v if isinstance(v, list) else [v])) < 1e-9
 
     def format(self, p: EffectParams | Mapping) -> str:
         """Parameters as the report shows them, with units (a mapping is read as this card's parameters)."""
@@ -218,35 +248,56 @@ class EffectCard:
         return f"<effect card {self.name}>"
 
 
-class OffsetSigmaCard(EffectCard):
+def _profile_fields(params: type[EffectParams]) -> list:
+    """The fields of ``params`` declared with a ``profile`` key, in field order."""
+    return [f for f in fields(params) if f.metadata.get("profile") is not None]
+
+
+class DeclaredProfileCard(EffectCard):
+    """A card whose noise-stage entry is declared by its parameter fields: each field with a ``profile``
+    key (:func:`quantity`) is one key of ``{type: <name>, ...}``, on normalised raw where
+    ``per_full_scale``; the conversion both ways is built from that declaration."""
+
+    def to_profile(self, p: EffectParams, model) -> ProfileTerm:
+        """Its part of the noise stage's composite entry (normalised raw):
+        ``{type: <name>, <key>: value}`` for each field declared with a ``profile`` key (:func:`quantity`)."""
+        entry: dict = {"type": self.name}
+        for f in _profile_fields(self.params):
+            v = getattr(p, f.name)
+            fs = model.full_scale_dn if f.metadata["per_full_scale"] else 1.0
+            entry[f.metadata["profile"]] = [float(x) / fs for x in v] if isinstance(v, list) else float(v / fs)
+        return ProfileTerm(effect=entry)
+
+    def from_profile(self, entry: Mapping, full_scale_dn: float) -> EffectParams:
+        """Parameters from the composite's effect entry of this ``type`` (``full_scale_dn``: white - black):
+        the inverse of :meth:`to_profile`'s, field by field."""
+        values = {}
+        for f in _profile_fields(self.params):
+            key, default = f.metadata["profile"], f.metadata.get("profile_default", MISSING)
+            raw = entry[key] if default is MISSING else entry.get(key, default)
+            if f.type in (list, "list"):  # one value per 2x2 site
+                a = np.asarray(raw, float)
+                values[f.name] = list(np.broadcast_to(a * full_scale_dn if f.metadata["per_full_scale"] else a, (4,)))
+            else:
+                values[f.name] = float(raw) * full_scale_dn if f.metadata["per_full_scale"] else float(raw)
+        return self.params(**values)
+
+
+class OffsetSigmaCard(DeclaredProfileCard, null_field="sigma_dn"):
     """An effect that is a zero-mean Gaussian offset of rms ``sigma_dn`` (DN) drawn per row and frame, per
     column or per pixel: it adds ``sigma_dn^2`` to the marginal variance, and its noise-stage entry is
-    ``{type: <name>, sigma: sigma_dn / (white - black)}`` (normalised raw)."""
-
-    null_field = "sigma_dn"
+    ``{type: <name>, sigma: sigma_dn / (white - black)}`` (normalised raw; the field declared with
+    ``profile="sigma", per_full_scale=True``)."""
 
     def marginal(self, p, v, lin, model):
         return v + p.sigma_dn ** 2
 
-    def to_profile(self, p, model):
-        return ProfileTerm(effect={"type": self.name, "sigma": float(p.sigma_dn / model.full_scale_dn)})
 
-    def from_profile(self, entry, full_scale_dn):
-        return self.params(sigma_dn=float(entry["sigma"]) * full_scale_dn)
-
-
-class GainSigmaCard(EffectCard):
+class GainSigmaCard(DeclaredProfileCard, null_field="sigma"):
     """An effect that is a zero-mean Gaussian relative gain of rms ``sigma`` (dimensionless) on the expected
     signal, drawn per pixel or per frame: it adds ``(sigma x)^2`` to the marginal variance (x the linear
-    signal above black, DN), and its noise-stage entry is ``{type: <name>, sigma}``."""
-
-    null_field = "sigma"
+    signal above black, DN), and its noise-stage entry is ``{type: <name>, sigma}`` (the field declared
+    with ``profile="sigma"``)."""
 
     def marginal(self, p, v, lin, model):
         return v + (p.sigma * lin) ** 2
-
-    def to_profile(self, p, model):
-        return ProfileTerm(effect={"type": self.name, "sigma": float(p.sigma)})
-
-    def from_profile(self, entry, full_scale_dn):
-        return self.params(sigma=float(entry["sigma"]))
