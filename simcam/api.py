@@ -29,6 +29,15 @@ def read(path: str | Path, *, normalize: bool = True):
     -------
     RawFrame
         ``.data`` (float32 H x W mosaic), ``.meta`` (every tag simcam uses), ``.kind``.
+
+    Examples
+    --------
+    >>> import simcam
+    >>> from pathlib import Path
+    >>> chart = Path(simcam.__file__).resolve().parent.parent / "examples" / "data" / "chart.dng"
+    >>> raw = read(chart)
+    >>> raw.kind, raw.data.ndim, raw.data.dtype.name
+    ('raw', 2, 'float32')
     """
     from .io.dng import read_dng
 

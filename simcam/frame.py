@@ -132,6 +132,30 @@ class CameraMeta:
     pairs of ``var = S * x + O`` on normalised raw (one pair, or one per CFA
     plane). ``origin`` is the (row, col) position of ``data[0, 0]`` in the full
     stored raw image; crops update it.
+
+    Parameters
+    ----------
+    make, model, unique_camera_model : str
+        Make, Model and UniqueCameraModel tags.
+    cfa : str or None
+        2x2 Bayer pattern of pixel (0, 0) (``"RGGB"``...); None for a mosaic of unknown layout.
+    black_level, white_level : ndarray, float
+        BlackLevel (DN, ``black_level_repeat_dim``) and WhiteLevel (DN).
+    **fields
+        Every other tag, by its field name (see the class body); all have defaults.
+
+    Attributes
+    ----------
+    fields
+        As the parameters; :meth:`to_dict` gives them JSON-friendly, :meth:`replace` a changed copy.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from simcam import CameraMeta
+    >>> meta = CameraMeta(cfa="BGGR", black_level=np.full((1, 1), 64.0), white_level=1023.0)
+    >>> meta.cfa, meta.white_level, meta.replace(iso=800.0).iso
+    ('BGGR', 1023.0, 800.0)
     """
 
     make: str = ""
@@ -270,6 +294,21 @@ class RawFrame:
         Metadata; stages that change geometry or colour state update a copy.
     kind : str
         One of :data:`SIGNAL_KINDS`.
+
+    Attributes
+    ----------
+    data, meta, kind
+        As the parameters (``data`` converted to float32 and checked against ``kind``).
+    history : list of str
+        The stages the frame went through.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from simcam import CameraMeta, RawFrame
+    >>> frame = RawFrame(np.zeros((4, 6)), CameraMeta(cfa="RGGB"), kind="raw")
+    >>> frame.data.dtype.name, frame.height, frame.width
+    ('float32', 4, 6)
     """
 
     data: np.ndarray

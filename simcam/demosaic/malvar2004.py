@@ -44,6 +44,13 @@ def demosaic_malvar2004(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
     Malvar, He & Cutler, ICASSP 2004, doi:10.1109/ICASSP.2004.1326587. Equals
     ``colour_demosaicing.demosaicing_CFA_Bayer_Malvar2004`` away from the 2-pixel
     border (and everywhere on a phase-preserving mirror-padded mosaic).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> mosaic = np.arange(36, dtype=np.float32).reshape(6, 6) / 36
+    >>> float(demosaic_malvar2004(mosaic, "RGGB")[0, 0, 0]) == float(mosaic[0, 0])  # red at (0, 0) kept
+    True
     """
     m, cfa, planes, h2, w2, rgb, rows = strip_setup(mosaic, cfa, "malvar2004")
     h, w = m.shape

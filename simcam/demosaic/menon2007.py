@@ -143,6 +143,13 @@ def demosaic_menon2007(mosaic: np.ndarray, cfa: str = "RGGB", *, refining_step: 
     -------
     ndarray
         H x W x 3 float32, not clipped.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> out = demosaic_menon2007(np.ones((8, 8), np.float32), "BGGR", refining_step=False)
+    >>> out.dtype.name, out.shape
+    ('float32', (8, 8, 3))
     """
     from ..parallel import run_bands
 

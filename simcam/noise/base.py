@@ -64,6 +64,17 @@ class NoiseCondition:
         Where the data came from (for error messages).
     exposure_s : float or None
         Exposure time in seconds (exposure-dependent effects: ``dark_current``, ``amp_glow``).
+
+    Parameters
+    ----------
+    iso, camera, cfa, source, exposure_s
+        As the attributes; ``cfa`` is checked (a bad pattern is a :class:`~simcam.errors.CfaError`).
+
+    Examples
+    --------
+    >>> cond = NoiseCondition(iso=800.0, camera="GP", cfa="GRBG")
+    >>> cond.iso, cond.cfa, cond.exposure_s is None
+    (800.0, 'GRBG', True)
     """
 
     iso: float | None = None
@@ -78,7 +89,29 @@ class NoiseCondition:
 
 
 class NoiseModel(BaseModel):
-    """Base of parametric noise models (see module docstring)."""
+    """Base of parametric noise models (see module docstring).
+
+    Parameters
+    ----------
+    type : str
+        The model's registered name (its subclasses fix it as a ``Literal`` default).
+    **params
+        The model's own fields (pydantic, ``extra="forbid"``, frozen).
+
+    Attributes
+    ----------
+    tractable : bool
+        False for models whose :meth:`log_prob` raises.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import simcam.noise
+    >>> model = model_types()["poisson_gaussian"](beta1=1e-3, beta2=1e-5)
+    >>> noisy = model.sample(np.full((32, 32), 0.5, np.float32), NoiseCondition(), np.random.default_rng(0))
+    >>> noisy.shape, model.to_entry()["type"]
+    ((32, 32), 'poisson_gaussian')
+    """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
@@ -229,7 +262,32 @@ class PoissonScaleModel(NoiseModel):
 # -- registry -------------------------------------------------------------
 
 def register_model(cls: type[NoiseModel]) -> type[NoiseModel]:
-    """Class decorator: register a model under its ``type`` literal default."""
+    """Class decorator: register a model under its ``type`` literal default.
+
+    Parameters
+    ----------
+    cls : type
+        A :class:`NoiseModel` subclass whose field ``type`` has a string default.
+
+    Returns
+    -------
+    type
+        ``cls`` itself, now found by :func:`model_from_entry` and :func:`model_types`.
+
+    Raises
+    ------
+    TypeError
+        No string default, or another class already holds the name.
+
+    Examples
+    --------
+    >>> from typing import Literal
+    >>> class Silent(NoiseModel):
+    ...     type: Literal["silent_doc_example"] = "silent_doc_example"
+    >>> register_model(Silent) is Silent, "silent_doc_example" in model_types()
+    (True, True)
+    >>> _ = _MODELS.pop("silent_doc_example")
+    """
     key = cls.model_fields["type"].default
     if not isinstance(key, str):
         raise TypeError(f"{cls.__name__}: field 'type' needs a string default")
@@ -240,7 +298,19 @@ def register_model(cls: type[NoiseModel]) -> type[NoiseModel]:
 
 
 def model_types() -> dict[str, type[NoiseModel]]:
-    """All registered model classes by ``type`` name (:mod:`simcam.noise` registers the built-in ones)."""
+    """All registered model classes by ``type`` name (:mod:`simcam.noise` registers the built-in ones).
+
+    Returns
+    -------
+    dict of str to type
+        A copy of the registry: ``{name: NoiseModel subclass}``.
+
+    Examples
+    --------
+    >>> import simcam.noise
+    >>> {"nlf", "poisson_gaussian"} <= set(model_types())
+    True
+    """
     return dict(_MODELS)
 
 

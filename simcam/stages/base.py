@@ -21,13 +21,57 @@ _REGISTRY: dict[str, type["Stage"]] = {}
 
 
 class StageParams(BaseModel):
-    """Base of every stage's parameters: unknown keys and loose types are errors."""
+    """Base of every stage's parameters: unknown keys and loose types are errors.
+
+    Attributes
+    ----------
+    fields
+        Each stage's ``Params`` subclass declares its YAML keys as pydantic fields (strict, frozen).
+
+    Examples
+    --------
+    >>> class Params(StageParams):
+    ...     strength: float = 1.0
+    >>> Params(strength=0.5).strength
+    0.5
+    >>> Params(strenght=0.5)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    pydantic_core._pydantic_core.ValidationError: ...
+    """
 
     model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
 
 
 class Stage:
-    """Base class of pipeline stages (see module docstring)."""
+    """Base class of pipeline stages (see module docstring).
+
+    Parameters
+    ----------
+    params : StageParams, optional
+        The stage's validated ``Params``; or give them as keywords instead.
+    **kwargs
+        The ``Params`` fields (validated strictly; unknown keys are errors).
+
+    Attributes
+    ----------
+    type : str
+        The stable key of the stage in pipeline YAML.
+    accepts, produces : frozenset of str, str or None
+        Signal kinds it takes and gives (None: the input's).
+    params : StageParams
+        Its parameters.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from simcam.frame import CameraMeta, RawFrame
+    >>> gamma = get_stage_class("gamma")(curve="power", exponent=0.5)
+    >>> frame = RawFrame(np.full((2, 2, 3), 0.25), CameraMeta(), kind="linear_srgb")
+    >>> out = gamma(frame)
+    >>> out.kind, float(out.data[0, 0, 0]), gamma.to_node()
+    ('display', 0.5, {'type': 'gamma', 'curve': 'power', 'exponent': 0.5})
+    """
 
     type: ClassVar[str]
     accepts: ClassVar[frozenset[str]]
@@ -78,7 +122,27 @@ class Stage:
 
 
 def register_stage(cls: type[Stage]) -> type[Stage]:
-    """Class decorator: register a stage under its stable ``type`` key."""
+    """Class decorator: register a stage under its stable ``type`` key.
+
+    Parameters
+    ----------
+    cls : type
+        A :class:`Stage` subclass with a string class attribute ``type``.
+
+    Returns
+    -------
+    type
+        ``cls`` itself, now found by :func:`get_stage_class` and :func:`stage_types`.
+
+    Examples
+    --------
+    >>> class Halve(Stage):
+    ...     type = "halve_doc_example"
+    ...     accepts = frozenset({"raw"})
+    >>> register_stage(Halve) is get_stage_class("halve_doc_example")
+    True
+    >>> _ = _REGISTRY.pop("halve_doc_example")
+    """
     key = getattr(cls, "type", None)
     if not key or not isinstance(key, str):
         raise TypeError(f"{cls.__name__} needs a string class attribute 'type'")
@@ -89,11 +153,48 @@ def register_stage(cls: type[Stage]) -> type[Stage]:
 
 
 def stage_types() -> dict[str, type[Stage]]:
-    """All registered stage classes by ``type`` key."""
+    """All registered stage classes by ``type`` key.
+
+    Returns
+    -------
+    dict of str to type
+        A copy of the registry: ``{type: Stage subclass}``.
+
+    Examples
+    --------
+    >>> import simcam.pipeline
+    >>> {"demosaic", "gamma"} <= set(stage_types())
+    True
+    """
     return dict(_REGISTRY)
 
 
 def get_stage_class(key: str, *, where: str = "type") -> type[Stage]:
+    """The stage class registered under ``key``.
+
+    Parameters
+    ----------
+    key : str
+        A stage ``type`` (``"gamma"``, ``"demosaic"``...).
+    where : str
+        Location named in the error message.
+
+    Returns
+    -------
+    type
+        The :class:`Stage` subclass.
+
+    Raises
+    ------
+    PipelineError
+        No stage has that key (the message lists the known ones).
+
+    Examples
+    --------
+    >>> import simcam.pipeline
+    >>> get_stage_class("gamma").__name__
+    'Gamma'
+    """
     try:
         return _REGISTRY[key]
     except KeyError:

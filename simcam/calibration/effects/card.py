@@ -64,6 +64,18 @@ class EffectParams(Mapping):
     loop's former dicts: :meth:`to_dict` is what ``loop_model.yaml`` and ``report.json`` hold.
     A subclass declares its fields with :func:`quantity` and is made a frozen dataclass on its
     definition (no decorator).
+
+    Attributes
+    ----------
+    fields
+        The subclass's fields, each declared with :func:`quantity` (unit, doc, profile key).
+
+    Examples
+    --------
+    >>> from simcam.calibration.effects.dsnu import Dsnu
+    >>> p = Dsnu(sigma_dn=2.5)
+    >>> dict(p), p.format()
+    ({'sigma_dn': 2.5}, 'sigma_dn = 2.5 DN')
     """
 
     def __init_subclass__(cls, **kwargs):
@@ -120,7 +132,27 @@ class EffectParams(Mapping):
 
 @dataclass(frozen=True)
 class Fit:
-    """A fit that also re-estimates the system gain K (DN/e-) with the effect's parameters."""
+    """A fit that also re-estimates the system gain K (DN/e-) with the effect's parameters.
+
+    Parameters
+    ----------
+    params : EffectParams
+        The fitted parameters.
+    K : float
+        The system gain re-estimated with them (DN/e-).
+
+    Attributes
+    ----------
+    params, K
+        As the parameters.
+
+    Examples
+    --------
+    >>> from simcam.calibration.effects.channel_gain import ChannelGain
+    >>> fit = Fit(ChannelGain(gains=[1.1, 1.0, 1.0, 0.9]), K=2.05)
+    >>> fit.K, fit.params.gains[0]
+    (2.05, 1.1)
+    """
 
     params: EffectParams
     K: float
@@ -136,6 +168,22 @@ class FitContext:
     :class:`~simcam.calibration.model.SimSpec`; ``simulate``: the loop's bootstrap,
     :func:`simcam.calibration.simulate.simulate_capture` (passed in: the cards sit below the
     simulator, which converts models through them).
+
+    Parameters
+    ----------
+    diagnostic, value, sim_mean, seed, dark_specs, simulate
+        As described above; all have defaults ("no such information").
+
+    Attributes
+    ----------
+    fields
+        As the parameters.
+
+    Examples
+    --------
+    >>> ctx = FitContext(diagnostic="frame_mean_jitter", value=3e-4, sim_mean=1e-4)
+    >>> round(ctx.value - ctx.sim_mean, 6), ctx.simulate is None
+    (0.0002, True)
     """
 
     diagnostic: str = ""
@@ -150,7 +198,28 @@ class FitContext:
 class ProfileTerm:
     """What one effect contributes to the noise stage's composite entry: ``effect``, its entry in
     the composite's effect list (None: none); ``beta1`` / ``beta2``, values that replace the
-    Poisson-Gaussian base's (normalised raw; None: unchanged)."""
+    Poisson-Gaussian base's (normalised raw; None: unchanged).
+
+    Parameters
+    ----------
+    effect : dict or None
+        The effect's entry in the composite's effect list.
+    beta1 : list or None
+        Per-site beta1 that replaces the base's (normalised raw).
+    beta2 : float or None
+        beta2 that replaces the base's (normalised raw).
+
+    Attributes
+    ----------
+    effect, beta1, beta2
+        As the parameters.
+
+    Examples
+    --------
+    >>> term = ProfileTerm(effect={"type": "dsnu", "sigma": 0.002})
+    >>> term.effect["type"], term.beta1, term.beta2
+    ('dsnu', None, None)
+    """
 
     effect: dict | None = None
     beta1: list | None = None
@@ -159,7 +228,30 @@ class ProfileTerm:
 
 class EffectCard:
     """One effect of the calibration loop's vocabulary (module docstring). Subclasses set the class
-    attributes and override the methods their effect needs; the defaults are "no contribution"."""
+    attributes and override the methods their effect needs; the defaults are "no contribution".
+
+    Attributes
+    ----------
+    name : str
+        The effect's name (and the noise stage's effect ``type``).
+    params : type
+        Its :class:`EffectParams` subclass.
+    diagnostics : tuple of str
+        The residual diagnostics that propose it.
+    fixed_pattern, gaussian, needs_darks, refit_on_change : bool
+        How the loop treats it (see the class attributes' comments).
+    marginal_rank : int or None
+        Position of its term in the closed-form marginal variance.
+    null_field, null_value : str or None, float
+        The parameter, and its value, that make the effect the identity.
+
+    Examples
+    --------
+    >>> from simcam.calibration.effects import card_for
+    >>> card = card_for("row_noise")
+    >>> card.diagnostics, card.marginal_rank, card.format({"sigma_dn": 1.5})
+    (('row_mean_excess',), 10, 'sigma_dn = 1.5 DN')
+    """
 
     #: the effect's name (and the noise stage's effect ``type``)
     name: ClassVar[str]

@@ -48,7 +48,35 @@ _EFFECTS: dict[str, type["Effect"]] = {}
 
 @dataclass
 class EffectContext:
-    """What an effect sees when applied to one frame."""
+    """What an effect sees when applied to one frame.
+
+    Parameters
+    ----------
+    cfa : str or None
+        Bayer pattern of the frame.
+    key : ndarray or None
+        The frame key of per-frame draws (None in ``log_prob``).
+    stream : int
+        Separates this effect's row-block streams from the base model's.
+    fixed, frame : dict
+        What :meth:`Effect.fixed` and :meth:`Effect.frame` drew.
+    signal, read : ndarray or None
+        Expected signal after the signal-stage effects; read noise so far (when needed).
+    exposure_s : float or None
+        Exposure time of the frame, seconds.
+
+    Attributes
+    ----------
+    fields
+        As the parameters.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> ctx = EffectContext(cfa="RGGB", key=None, stream=1)
+    >>> ctx.fixed, ctx.exposure_s
+    ({}, None)
+    """
 
     cfa: str | None
     key: np.ndarray | None  # frame key (None in log_prob: per-frame draws unavailable)
@@ -69,7 +97,30 @@ class EffectContext:
 
 
 class Effect(BaseModel):
-    """Base class of effects (see module docstring)."""
+    """Base class of effects (see module docstring).
+
+    Parameters
+    ----------
+    type : str
+        The effect's name, one of :data:`EFFECT_NAMES` (subclasses fix it as a ``Literal`` default).
+    **params
+        The effect's own fields (pydantic, ``extra="forbid"``, frozen): its profile entry.
+
+    Attributes
+    ----------
+    stage : {"signal", "readout"}
+        Where it acts: on the expected signal, or on the noisy value after the base model.
+    logprob_role : str or None
+        How a composite's ``log_prob`` treats it (module docstring).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import simcam.noise
+    >>> fpn = effect_from_entry({"type": "column_fpn", "sigma": 0.01})
+    >>> fpn.stage, fpn.to_entry()["sigma"]
+    ('readout', 0.01)
+    """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
@@ -118,10 +169,47 @@ def register_effect(cls: type[Effect]) -> type[Effect]:
 
 
 def effect_types() -> dict[str, type[Effect]]:
+    """All registered effect classes by ``type`` name (:mod:`simcam.noise` registers them).
+
+    Returns
+    -------
+    dict of str to type
+        A copy of the registry: ``{name: Effect subclass}``.
+
+    Examples
+    --------
+    >>> import simcam.noise
+    >>> sorted(effect_types())[:3]
+    ['adc_dnl', 'amp_glow', 'black_level_offset']
+    """
     return dict(_EFFECTS)
 
 
 def effect_from_entry(entry: Any, *, where: str = "effect") -> Effect:
+    """Build an effect from its profile entry ``{type: ..., **params}`` or raise NoiseModelError.
+
+    Parameters
+    ----------
+    entry : dict or Effect
+        An entry of a composite model's ``effects:`` list (an effect is returned as is).
+    where : str
+        Location named in the error message.
+
+    Returns
+    -------
+    Effect
+        An instance of the class registered under ``entry["type"]``.
+
+    Examples
+    --------
+    >>> import simcam.noise
+    >>> effect_from_entry({"type": "row_noise", "sigma": 0.002}).sigma
+    0.002
+    >>> effect_from_entry({"type": "blur"}, where="profile.yaml: effects[0]")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    simcam.errors.NoiseModelError: profile.yaml: effects[0]...
+    """
     return from_registry(entry, _EFFECTS, base=Effect, noun="effect", expected=list(EFFECT_NAMES), where=where)
 
 
