@@ -69,6 +69,18 @@ class Burst:
         are censored). From metadata when known: ``-black/(white-black)`` and 1.
     nan_policy : {"raise", "omit"}
         NaN in a frame raises :class:`DatasetError` (default) or marks missing samples.
+
+    Attributes
+    ----------
+    settings : FrameSettings or None
+        ISO, exposure and size shared by the frames (from their metadata), once checked.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> burst = Burst.from_arrays([np.full((4, 4), 0.2 + 0.01 * i) for i in range(3)], cfa="RGGB")
+    >>> len(burst), round(float(burst.load(2).mean()), 2)
+    (3, 0.22)
     """
 
     loaders: Sequence[Callable[[], object]]
