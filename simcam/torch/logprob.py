@@ -214,6 +214,28 @@ def log_prob(noisy: torch.Tensor, clean: torch.Tensor, profile_or_model: Any, *,
 
     Same layouts and model sources as :func:`simcam.torch.add_noise`; equal to the numpy model's
     ``log_prob`` on the same values (the composite's is given its ``sensor_seed`` fixed pattern).
+
+    Parameters
+    ----------
+    noisy, clean : Tensor
+        The same shape: packed ``[B, 4, h, w]`` or mosaic ``[B, 1, H, W]`` normalised raw.
+    profile_or_model
+        As :func:`simcam.torch.add_noise` (not a Noise Flow).
+    iso, camera, extrapolate
+        As :func:`simcam.torch.add_noise`.
+
+    Returns
+    -------
+    Tensor
+        float64 log-density per pixel, shape of ``clean``.
+
+    Examples
+    --------
+    >>> import torch
+    >>> clean = torch.full((1, 1, 2, 2), 0.25)
+    >>> lp = log_prob(clean + 0.01, clean, {"type": "nlf", "beta1": 1e-3, "beta2": 1e-5})
+    >>> lp.dtype, bool((lp < log_prob(clean, clean, {"type": "nlf", "beta1": 1e-3, "beta2": 1e-5})).all())
+    (torch.float64, True)
     """
     layout = layout_of(clean)
     if noisy.shape != clean.shape:
