@@ -33,11 +33,10 @@ def read(path: str | Path, *, normalize: bool = True):
     Examples
     --------
     >>> import simcam
-    >>> from pathlib import Path
-    >>> chart = Path(simcam.__file__).resolve().parent.parent / "examples" / "data" / "chart.dng"
-    >>> raw = read(chart)
-    >>> raw.kind, raw.data.ndim, raw.data.dtype.name
-    ('raw', 2, 'float32')
+    >>> examples = Path(simcam.__file__).resolve().parents[1] / "examples"
+    >>> raw = read(examples / "data" / "chart.dng", normalize=False)
+    >>> raw.kind, raw.data.dtype.name
+    ('raw_dn', 'float32')
     """
     from .io.dng import read_dng
 

@@ -23,6 +23,7 @@ MODULES = [
     "simcam.errors",
     "simcam.frame",
     "simcam.raw",
+    "simcam.registry",
     "simcam.yamlio",
     "simcam.io.inputs",
     "simcam.io.normalized",

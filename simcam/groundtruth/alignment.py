@@ -360,10 +360,8 @@ def global_shift(reference: Reference, frame: np.ndarray) -> tuple[np.ndarray, b
 
     Parameters
     ----------
-    reference : Reference
-        From :func:`prepare_reference`.
-    frame : ndarray, H x W
-        The frame to register.
+    reference, frame
+        As :func:`local_shifts`.
 
     Returns
     -------

@@ -230,7 +230,6 @@ def stream_mean(burst: Burst, shape: tuple[int, int] | None = None, what: str = 
 
     Examples
     --------
-    >>> import numpy as np
     >>> darks = Burst.from_arrays([np.full((4, 4), v) for v in (0.1, 0.3)], cfa="RGGB")
     >>> m = stream_mean(darks, (4, 4))
     >>> m.shape, round(float(m.mean()), 3)

@@ -96,7 +96,6 @@ def align_intensity(frame: np.ndarray, mu_i: float, mu_a: float, mode: str = "ad
 
     Examples
     --------
-    >>> import numpy as np
     >>> align_intensity(np.full((2, 2), 0.4, np.float32), 0.4, 0.5, "multiplicative").tolist()
     [[0.5, 0.5], [0.5, 0.5]]
     """

@@ -29,6 +29,7 @@ from pydantic import BaseModel, ConfigDict, ValidationError, field_validator
 
 from ..cfa import check_pattern
 from ..errors import NoiseModelError, SimcamError
+from ..registry import Registry
 
 #: rows per independently seeded block (even, so the CFA phase is the same in every block).
 BLOCK_ROWS = 32
@@ -44,7 +45,7 @@ def sub_rows(width: int) -> int:
 
 SiteParam = Union[float, list[float]]
 
-_MODELS: dict[str, type["NoiseModel"]] = {}
+_MODELS = Registry("noise model type")
 
 
 @dataclass(frozen=True)
@@ -291,10 +292,7 @@ def register_model(cls: type[NoiseModel]) -> type[NoiseModel]:
     key = cls.model_fields["type"].default
     if not isinstance(key, str):
         raise TypeError(f"{cls.__name__}: field 'type' needs a string default")
-    if key in _MODELS and _MODELS[key] is not cls:
-        raise TypeError(f"noise model type {key!r} registered twice")
-    _MODELS[key] = cls
-    return cls
+    return _MODELS.add(key, cls)
 
 
 def model_types() -> dict[str, type[NoiseModel]]:
@@ -302,16 +300,16 @@ def model_types() -> dict[str, type[NoiseModel]]:
 
     Returns
     -------
-    dict of str to type
-        A copy of the registry: ``{name: NoiseModel subclass}``.
+    dict
+        ``{type name: NoiseModel subclass}``; a copy, so changing it leaves the registry as it is.
 
     Examples
     --------
     >>> import simcam.noise
-    >>> {"nlf", "poisson_gaussian"} <= set(model_types())
-    True
+    >>> model_types()["nlf"].__name__, "poisson_gaussian" in model_types()
+    ('NLF', True)
     """
-    return dict(_MODELS)
+    return _MODELS.types()
 
 
 def from_registry(entry: Any, registry: dict[str, type], *, base: type, noun: str, expected: list[str],

@@ -16,8 +16,9 @@ from pydantic import BaseModel, ConfigDict
 
 from ..errors import PipelineError, StageError
 from ..frame import RawFrame
+from ..registry import Registry
 
-_REGISTRY: dict[str, type["Stage"]] = {}
+_REGISTRY = Registry("stage type", name_both=True)
 
 
 class StageParams(BaseModel):
@@ -146,19 +147,20 @@ def register_stage(cls: type[Stage]) -> type[Stage]:
     key = getattr(cls, "type", None)
     if not key or not isinstance(key, str):
         raise TypeError(f"{cls.__name__} needs a string class attribute 'type'")
-    if key in _REGISTRY and _REGISTRY[key] is not cls:
-        raise TypeError(f"stage type {key!r} registered twice ({_REGISTRY[key].__name__}, {cls.__name__})")
-    _REGISTRY[key] = cls
-    return cls
+    return _REGISTRY.add(key, cls)
 
 
 def stage_types() -> dict[str, type[Stage]]:
-    """All registered stage classes by ``type`` key.
+    """All registered stage classes by ``type`` key (importing :mod:`simcam.pipeline` registers the built-in ones).
 
     Returns
     -------
     dict of str to type
-        A copy of the registry: ``{type: Stage subclass}``.
+        A copy of the stage registry.
+
+    See Also
+    --------
+    get_stage_class : one class, with an error that lists the keys.
 
     Examples
     --------
@@ -166,7 +168,7 @@ def stage_types() -> dict[str, type[Stage]]:
     >>> {"demosaic", "gamma"} <= set(stage_types())
     True
     """
-    return dict(_REGISTRY)
+    return _REGISTRY.types()
 
 
 def get_stage_class(key: str, *, where: str = "type") -> type[Stage]:

@@ -36,6 +36,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict
 
 from ...errors import NoiseModelError
+from ...registry import Registry
 from ..base import BLOCK_ROWS, block_rng, from_registry, site_map, site_values
 
 EFFECT_NAMES = ("row_noise", "column_fpn", "dsnu", "prnu", "hot_pixels", "heavy_tail_read", "quantization",
@@ -43,7 +44,7 @@ EFFECT_NAMES = ("row_noise", "column_fpn", "dsnu", "prnu", "hot_pixels", "heavy_
                 "channel_gain", "dark_current", "amp_glow", "dead_pixels", "adc_dnl", "rtn", "charge_crosstalk",
                 "empirical_offset", "empirical_gain", "empirical_code", "empirical_field")
 
-_EFFECTS: dict[str, type["Effect"]] = {}
+_EFFECTS = Registry("effect type")
 
 
 @dataclass
@@ -67,12 +68,11 @@ class EffectContext:
 
     Attributes
     ----------
-    fields
-        As the parameters.
+    cfa, key, stream, fixed, frame, signal, read, exposure_s
+        As the parameters; :meth:`block_rng` gives the generator of a row block.
 
     Examples
     --------
-    >>> import numpy as np
     >>> ctx = EffectContext(cfa="RGGB", key=None, stream=1)
     >>> ctx.fixed, ctx.exposure_s
     ({}, None)
@@ -182,7 +182,7 @@ def effect_types() -> dict[str, type[Effect]]:
     >>> sorted(effect_types())[:3]
     ['adc_dnl', 'amp_glow', 'black_level_offset']
     """
-    return dict(_EFFECTS)
+    return _EFFECTS.types()
 
 
 def effect_from_entry(entry: Any, *, where: str = "effect") -> Effect:
