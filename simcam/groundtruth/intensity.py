@@ -94,6 +94,10 @@ def align_intensity(frame: np.ndarray, mu_i: float, mu_a: float, mode: str = "ad
     ndarray
         float32 frame with mean ``mu_a``.
 
+    See Also
+    --------
+    frame_outliers : the common mean ``mu_a`` and the frames kept.
+
     Examples
     --------
     >>> align_intensity(np.full((2, 2), 0.4, np.float32), 0.4, 0.5, "multiplicative").tolist()

@@ -494,9 +494,12 @@ def plain_mean(samples: np.ndarray, *, lo: float = 0.0, hi: float = 1.0, min_sam
     RobustMean
         The plain mean and standard deviation per pixel.
 
+    See Also
+    --------
+    robust_mean : the estimate that accounts for the clipped samples.
+
     Examples
     --------
-    >>> import numpy as np
     >>> plain_mean(np.array([[1.0], [0.5], [np.nan]])).mu.tolist()  # the clipped 1.0 counts as it is
     [0.75]
     """

@@ -737,10 +737,7 @@ def read_dng_meta(path: str | os.PathLike) -> CameraMeta:
 def read_dng(path: str | os.PathLike) -> RawFrame:
     """Read a DNG: the full stored CFA image in DN plus its metadata.
 
-    Parameters
-    ----------
-    path : path-like
-        A DNG file with a CFA (Bayer) main image.
+    ``path`` is a DNG file with a CFA (Bayer) main image, as for :func:`read_dng_meta`.
 
     Returns
     -------
