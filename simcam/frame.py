@@ -30,6 +30,13 @@ SIGNAL_KINDS = ("raw_dn", "raw", "camera_rgb", "xyz", "linear_srgb", "display")
 MOSAIC_KINDS = frozenset({"raw_dn", "raw"})
 RGB_KINDS = frozenset({"camera_rgb", "xyz", "linear_srgb", "display"})
 
+#: CameraMeta's colour matrices and the DNG tags that hold them (DNG specification 1.7, chapter 6)
+COLOUR_MATRIX_TAGS = {
+    "color_matrix1": "ColorMatrix1", "color_matrix2": "ColorMatrix2",
+    "camera_calibration1": "CameraCalibration1", "camera_calibration2": "CameraCalibration2",
+    "forward_matrix1": "ForwardMatrix1", "forward_matrix2": "ForwardMatrix2",
+}
+
 #: DNG opcode ids -> names (DNG 1.6 specification, chapter 7).
 OPCODE_NAMES = {
     1: "WarpRectilinear",

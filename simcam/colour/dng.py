@@ -45,6 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import MetadataError
+from ..frame import COLOUR_MATRIX_TAGS
 
 #: D50 white of the DNG profile connection space, CIE 1931 2 deg xy (DNG SDK ``D50_xy_coord``).
 D50_XY = np.array([0.3457, 0.3585])
@@ -221,9 +222,7 @@ def bradford_matrix(xyz_src, xyz_dst) -> np.ndarray:
 # -- the profile -----------------------------------------------------------------------
 
 _TAG_NAMES = {
-    "color_matrix1": "ColorMatrix1", "color_matrix2": "ColorMatrix2",
-    "camera_calibration1": "CameraCalibration1", "camera_calibration2": "CameraCalibration2",
-    "forward_matrix1": "ForwardMatrix1", "forward_matrix2": "ForwardMatrix2",
+    **COLOUR_MATRIX_TAGS,
     "analog_balance": "AnalogBalance", "as_shot_neutral": "AsShotNeutral",
     "as_shot_white_xy": "AsShotWhiteXY",
 }
@@ -296,8 +295,7 @@ class DngColorProfile:
             raise MetadataError(
                 f"{src}: ColorMatrix1: missing; expected a 3x3 XYZ->camera matrix (required for colour rendering)")
         mats = {}
-        for name in ("color_matrix1", "color_matrix2", "camera_calibration1", "camera_calibration2",
-                     "forward_matrix1", "forward_matrix2"):
+        for name in COLOUR_MATRIX_TAGS:
             value = getattr(meta, name, None)
             mats[name] = None if value is None else check_matrix(value, _TAG_NAMES[name], src)
         ab = getattr(meta, "analog_balance", None)

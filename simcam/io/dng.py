@@ -33,7 +33,7 @@ import numpy as np
 
 from ..cfa import BAYER_PATTERNS, shift_pattern
 from ..errors import DngError
-from ..frame import CameraMeta, RawFrame
+from ..frame import COLOUR_MATRIX_TAGS, CameraMeta, RawFrame
 from .dcp import embedded_profile_extra
 from .dng_tags import T, check_raw_entries
 from .opcodes import check_opcode_work, parse_opcode_list
@@ -657,12 +657,7 @@ def _meta_from_tiff(tif, path: Path, log: _LogCapture | None = None) -> tuple[Ca
         linearization_table=lin,
         as_shot_neutral=vec3("AsShotNeutral"),
         as_shot_white_xy=vec3("AsShotWhiteXY", 2),
-        color_matrix1=tags.matrix("ColorMatrix1"),
-        color_matrix2=tags.matrix("ColorMatrix2"),
-        camera_calibration1=tags.matrix("CameraCalibration1"),
-        camera_calibration2=tags.matrix("CameraCalibration2"),
-        forward_matrix1=tags.matrix("ForwardMatrix1"),
-        forward_matrix2=tags.matrix("ForwardMatrix2"),
+        **{name: tags.matrix(tag) for name, tag in COLOUR_MATRIX_TAGS.items()},
         analog_balance=vec3("AnalogBalance"),
         calibration_illuminant1=illuminant("CalibrationIlluminant1"),
         calibration_illuminant2=illuminant("CalibrationIlluminant2"),

@@ -89,7 +89,20 @@ class NoiseCondition:
             object.__setattr__(self, "cfa", check_pattern(self.cfa, where=f"{self.source or 'cond'}: cfa"))
 
 
-class NoiseModel(BaseModel):
+class ProfileEntryModel(BaseModel):
+    """A pydantic model that is one entry of a noise profile, ``{type: NAME, **params}``: the base of the
+    noise models (:class:`NoiseModel`) and of their effects (:class:`simcam.noise.effects.Effect`)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    type: str
+
+    def to_entry(self) -> dict[str, Any]:
+        """The profile entry (JSON-compatible dict, ``type`` first)."""
+        return self.model_dump(mode="json")
+
+
+class NoiseModel(ProfileEntryModel):
     """Base of parametric noise models (see module docstring).
 
     Parameters
@@ -114,17 +127,10 @@ class NoiseModel(BaseModel):
     ((32, 32), 'poisson_gaussian')
     """
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    type: str
     #: False for models whose log_prob raises (documented per model).
     tractable: ClassVar[bool] = True
 
     # -- serialisation ----------------------------------------------------
-    def to_entry(self) -> dict[str, Any]:
-        """The profile entry (JSON-compatible dict, ``type`` first)."""
-        return self.model_dump(mode="json")
-
     @classmethod
     def from_entry(cls, entry: dict[str, Any], *, where: str = "model") -> "NoiseModel":
         return model_from_entry(entry, where=where)

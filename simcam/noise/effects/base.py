@@ -33,11 +33,10 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, ClassVar, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict
 
 from ...errors import NoiseModelError
 from ...registry import Registry
-from ..base import BLOCK_ROWS, block_rng, from_registry, site_map, site_values
+from ..base import BLOCK_ROWS, ProfileEntryModel, block_rng, from_registry, site_map, site_values
 
 EFFECT_NAMES = ("row_noise", "column_fpn", "dsnu", "prnu", "hot_pixels", "heavy_tail_read", "quantization",
                 "spatial_correlation", "periodic_pattern", "black_level_offset", "frame_flicker", "nonlinearity",
@@ -96,7 +95,7 @@ class EffectContext:
         return block_rng(self.key, block, stream=self.stream)
 
 
-class Effect(BaseModel):
+class Effect(ProfileEntryModel):
     """Base class of effects (see module docstring).
 
     Parameters
@@ -122,9 +121,6 @@ class Effect(BaseModel):
     ('readout', 0.01)
     """
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    type: str
     stage: ClassVar[Literal["signal", "readout"]] = "readout"
     logprob_role: ClassVar[str | None] = None
     #: True for effects acting on the read noise alone (the composite then samples it apart).
@@ -132,9 +128,6 @@ class Effect(BaseModel):
     #: True when ``apply`` is elementwise or broadcasts a fixed (H, W) map, needs no per-frame
     #: draw, and so may be given a whole (n, H, W) stack at once (``Composite.sample_frames``).
     stack_ok: ClassVar[bool] = False
-
-    def to_entry(self) -> dict[str, Any]:
-        return self.model_dump(mode="json")
 
     @classmethod
     def from_entry(cls, entry: dict[str, Any], *, where: str = "effect") -> "Effect":
