@@ -86,6 +86,10 @@ class Stage:
         elif kwargs:
             raise TypeError("pass either a Params object or keyword parameters, not both")
         self.params = params
+        self.check_params(params)
+
+    def check_params(self, p: StageParams) -> None:
+        """Checks of the parameters beyond their types (a stage's ranges and combinations): StageError."""
 
     # -- contract ----------------------------------------------------------
     def output_kind(self, kind: str) -> str:

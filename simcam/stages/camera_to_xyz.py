@@ -57,9 +57,7 @@ class CameraToXYZ(Stage):
         #: dng: DNG-specification colour; sidd: simple-camera-pipeline compatibility
         mode: Literal["dng", "sidd"] = "dng"
 
-    def __init__(self, params=None, **kw):
-        super().__init__(params, **kw)
-        p = self.params
+    def check_params(self, p) -> None:
         if (p.white == "neutral") != (p.neutral is not None):
             raise StageError("camera_to_xyz: neutral: expected [r, g, b] exactly when white is 'neutral'")
         if (p.white == "xy") != (p.xy is not None):

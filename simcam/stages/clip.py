@@ -24,9 +24,8 @@ class Clip(Stage):
         low: Optional[float] = 0.0
         high: Optional[float] = 1.0
 
-    def __init__(self, params=None, **kw):
-        super().__init__(params, **kw)
-        lo, hi = self.params.low, self.params.high
+    def check_params(self, p) -> None:
+        lo, hi = p.low, p.high
         for name, v in (("low", lo), ("high", hi)):
             if v is not None and not np.isfinite(v):
                 raise StageError(f"clip: {name}: expected a finite number or null, got {v}")
@@ -54,10 +53,9 @@ class Quantize(Stage):
     class Params(StageParams):
         bits: int = 8
 
-    def __init__(self, params=None, **kw):
-        super().__init__(params, **kw)
-        if not 1 <= self.params.bits <= 16:
-            raise StageError(f"quantize: bits: expected an integer in 1..16, got {self.params.bits}")
+    def check_params(self, p) -> None:
+        if not 1 <= p.bits <= 16:
+            raise StageError(f"quantize: bits: expected an integer in 1..16, got {p.bits}")
 
     def apply(self, frame: RawFrame, drawn=None) -> RawFrame:
         levels = np.float32(2 ** self.params.bits - 1)

@@ -127,9 +127,7 @@ class Dcp(Stage):
         #: use ForwardMatrix1/2 when the profile has them
         use_forward_matrix: bool = True
 
-    def __init__(self, params=None, **kw):
-        super().__init__(params, **kw)
-        p = self.params
+    def check_params(self, p) -> None:
         if p.source == "file" and not p.path:
             raise StageError("dcp: path: expected the .dcp file to read when source is 'file'")
         if p.source == "embedded" and p.path:

@@ -23,10 +23,9 @@ class Gamma(Stage):
         #: exponent of the power curve (default 1/2.2); power only
         exponent: float = 1.0 / 2.2
 
-    def __init__(self, params=None, **kw):
-        super().__init__(params, **kw)
-        if not (0.0 < self.params.exponent < 10.0):
-            raise StageError(f"gamma: exponent: expected a value in (0, 10), got {self.params.exponent}")
+    def check_params(self, p) -> None:
+        if not (0.0 < p.exponent < 10.0):
+            raise StageError(f"gamma: exponent: expected a value in (0, 10), got {p.exponent}")
 
     def apply(self, frame: RawFrame, drawn=None) -> RawFrame:
         if self.params.curve == "srgb":

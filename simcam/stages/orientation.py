@@ -75,9 +75,8 @@ class Orientation(Stage):
         value: Optional[int] = None
         convention: Literal["exif", "sidd"] = "exif"
 
-    def __init__(self, params=None, **kw):
-        super().__init__(params, **kw)
-        v = self.params.value
+    def check_params(self, p) -> None:
+        v = p.value
         if v is not None and not 1 <= v <= 8:
             raise StageError(f"orientation: value: expected an EXIF orientation 1..8, got {v}")
 

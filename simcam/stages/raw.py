@@ -74,9 +74,7 @@ class Crop(Stage):
         rect: Optional[tuple[int, int, int, int]] = None
         phase: Literal["keep", "update"] = "keep"
 
-    def __init__(self, params=None, **kw):
-        super().__init__(params, **kw)
-        p = self.params
+    def check_params(self, p) -> None:
         if (p.region == "explicit") != (p.rect is not None):
             raise StageError("rect: expected [top, left, bottom, right] exactly when region is 'explicit'")
 

@@ -36,9 +36,7 @@ class Tone(Stage):
         #: filmic only: the scene value (before exposure) mapped to display white
         white: float = 1.0
 
-    def __init__(self, params=None, **kw):
-        super().__init__(params, **kw)
-        p = self.params
+    def check_params(self, p) -> None:
         if not np.isfinite(p.exposure) or abs(p.exposure) > 64:
             raise StageError(f"tone: exposure: expected a finite value in [-64, 64] EV, got {p.exposure}")
         if not (np.isfinite(p.white) and p.white > 0):

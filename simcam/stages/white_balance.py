@@ -121,9 +121,7 @@ class WhiteBalance(Stage):
         #: white_patch: share of the brightest unclipped cells averaged as the white
         white_patch_fraction: float = 0.01
 
-    def __init__(self, params=None, **kw):
-        super().__init__(params, **kw)
-        p = self.params
+    def check_params(self, p) -> None:
         if p.neutral is not None and p.gains is not None:
             raise StageError("white_balance: expected either neutral: [r, g, b] or gains: [r, g, b], not both")
         if p.source == "neutral" and p.neutral is None:
