@@ -80,6 +80,15 @@ class Stage:
     random: ClassVar[bool] = False
     Params: ClassVar[type[StageParams]] = StageParams
 
+    def __init_subclass__(cls, **attrs: Any):
+        """A stage declares ``type``, ``accepts``, ``produces`` and ``random`` as keywords of its class
+        statement (``class Gamma(Stage, type="gamma", accepts=frozenset({"linear_srgb"}), produces="display")``)."""
+        super().__init_subclass__()
+        for key, value in attrs.items():
+            if key not in ("type", "accepts", "produces", "random"):
+                raise TypeError(f"stage {cls.__name__}: unknown class keyword {key!r}")
+            setattr(cls, key, value)
+
     def __init__(self, params: StageParams | None = None, **kwargs: Any):
         if params is None:
             params = self.Params.model_validate_json(_to_json(kwargs))
@@ -141,9 +150,8 @@ def register_stage(cls: type[Stage]) -> type[Stage]:
 
     Examples
     --------
-    >>> class Halve(Stage):
-    ...     type = "halve_doc_example"
-    ...     accepts = frozenset({"raw"})
+    >>> class Halve(Stage, type="halve_doc_example", accepts=frozenset({"raw"})):
+    ...     pass
     >>> register_stage(Halve) is get_stage_class("halve_doc_example")
     True
     >>> _ = _REGISTRY.pop("halve_doc_example")

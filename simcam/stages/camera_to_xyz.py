@@ -32,17 +32,13 @@ from .white_balance import capture_neutral
 
 
 @register_stage
-class CameraToXYZ(Stage):
+class CameraToXYZ(Stage, type="camera_to_xyz", accepts=frozenset({"camera_rgb"}), produces="xyz"):
     """Camera RGB -> XYZ D50 with the DNG colour matrices of the capture's white.
 
     ``white``: ``auto`` (the white the data were balanced to, i.e. 1 / meta.white_balance_gains,
     else the as-shot white), ``as_shot`` (AsShotNeutral / AsShotWhiteXY), ``neutral``
     (explicit camera neutral), ``xy`` (explicit CIE 1931 xy).
     """
-
-    type = "camera_to_xyz"
-    accepts = frozenset({"camera_rgb"})
-    produces = "xyz"
 
     class Params(StageParams):
         white: Literal["auto", "as_shot", "neutral", "xy"] = "auto"

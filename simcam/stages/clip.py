@@ -14,11 +14,8 @@ _NOT_DN = frozenset(k for k in SIGNAL_KINDS if k != "raw_dn")
 
 
 @register_stage
-class Clip(Stage):
+class Clip(Stage, type="clip", accepts=_NOT_DN):
     """Clamp values to ``[low, high]`` (either bound may be ``null`` for none). float32."""
-
-    type = "clip"
-    accepts = _NOT_DN
 
     class Params(StageParams):
         low: Optional[float] = 0.0
@@ -41,14 +38,11 @@ class Clip(Stage):
 
 
 @register_stage
-class Quantize(Stage):
+class Quantize(Stage, type="quantize", accepts=_NOT_DN):
     """Round to ``2^bits - 1`` steps on [0, 1] (values are clipped to [0, 1] first); stays float32.
 
     ``out = round(clip(x, 0, 1) * (2^bits - 1)) / (2^bits - 1)`` (round half to even).
     """
-
-    type = "quantize"
-    accepts = _NOT_DN
 
     class Params(StageParams):
         bits: int = 8

@@ -102,12 +102,8 @@ class DcpRender:
 
 
 @register_stage
-class Dcp(Stage):
+class Dcp(Stage, type="dcp", accepts=frozenset({"camera_rgb"}), produces="xyz"):
     """Camera RGB -> XYZ (D50) through a DNG camera profile (matrices, HueSatMap, exposure, LookTable, tone curve)."""
-
-    type = "dcp"
-    accepts = frozenset({"camera_rgb"})
-    produces = "xyz"
 
     class Params(StageParams):
         #: auto: a .dcp file when ``path`` is set, else the DNG's embedded profile

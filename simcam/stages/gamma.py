@@ -11,12 +11,8 @@ from .base import Stage, StageParams, register_stage
 
 
 @register_stage
-class Gamma(Stage):
+class Gamma(Stage, type="gamma", accepts=frozenset({"linear_srgb"}), produces="display"):
     """``curve: srgb`` (IEC 61966-2-1 piecewise OETF) or ``power`` (``sign(x)|x|^exponent``)."""
-
-    type = "gamma"
-    accepts = frozenset({"linear_srgb"})
-    produces = "display"
 
     class Params(StageParams):
         curve: Literal["srgb", "power"] = "srgb"

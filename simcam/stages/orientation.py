@@ -64,11 +64,8 @@ def orient(image: np.ndarray, value: int) -> np.ndarray:
 
 
 @register_stage
-class Orientation(Stage):
+class Orientation(Stage, type="orientation", accepts=frozenset(RGB_KINDS)):
     """Make the image upright from ``meta.orientation`` (or an explicit ``value``)."""
-
-    type = "orientation"
-    accepts = frozenset(RGB_KINDS)
 
     class Params(StageParams):
         #: EXIF orientation 1..8; None reads meta.orientation

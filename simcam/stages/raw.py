@@ -21,12 +21,8 @@ from .base import Stage, StageParams, register_stage
 
 
 @register_stage
-class Normalize(Stage):
+class Normalize(Stage, type="normalize", accepts=frozenset({"raw_dn"}), produces="raw"):
     """DN -> normalised raw: linearization, per-site black (with deltas), white. No clipping."""
-
-    type = "normalize"
-    accepts = frozenset({"raw_dn"})
-    produces = "raw"
 
     class Params(StageParams):
         #: override the file's black level (DN); None uses the metadata
@@ -57,7 +53,7 @@ def _finite_pair(values, tag: str, source: str) -> tuple[float, float]:
 
 
 @register_stage
-class Crop(Stage):
+class Crop(Stage, type="crop", accepts=frozenset(SIGNAL_KINDS)):
     """Crop to the active area, the DNG default crop, or an explicit rectangle.
 
     ``rect`` is ``[top, left, bottom, right]`` in pixels of the current frame
@@ -65,9 +61,6 @@ class Crop(Stage):
     the CFA phase: ``phase: keep`` (default) refuses such a crop, ``phase:
     update`` accepts it and rewrites ``meta.cfa`` so it describes the data.
     """
-
-    type = "crop"
-    accepts = frozenset(SIGNAL_KINDS)
 
     class Params(StageParams):
         region: Literal["active_area", "default", "explicit"] = "active_area"

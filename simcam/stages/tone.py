@@ -23,11 +23,8 @@ from .base import Stage, StageParams, register_stage
 
 
 @register_stage
-class Tone(Stage):
+class Tone(Stage, type="tone", accepts=frozenset({"linear_srgb", "display"})):
     """Tone curve: ``none``, ``sidd`` (3x^2 - 2x^3 on [0, 1]) or ``filmic`` (Hable 2010); ``exposure`` in EV for all."""
-
-    type = "tone"
-    accepts = frozenset({"linear_srgb", "display"})
 
     class Params(StageParams):
         curve: Literal["none", "sidd", "filmic"] = "none"

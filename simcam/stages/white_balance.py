@@ -97,16 +97,13 @@ def estimate_neutral(frame: RawFrame, method: str, *, clip_level: float = 0.98, 
 
 
 @register_stage
-class WhiteBalance(Stage):
+class WhiteBalance(Stage, type="white_balance", accepts=frozenset({"raw", "camera_rgb"})):
     """White balance by channel gains (G = 1); records them as ``meta.white_balance_gains``.
 
     ``source``: ``as_shot`` (the file's white), ``neutral`` (explicit camera neutral,
     gains = 1 / neutral), ``gains`` (explicit), ``none`` (no change). An explicit
     ``neutral`` or ``gains`` given with ``source: as_shot`` overrides the as-shot white.
     """
-
-    type = "white_balance"
-    accepts = frozenset({"raw", "camera_rgb"})
 
     class Params(StageParams):
         source: Literal["as_shot", "neutral", "gains", "grey_world", "white_patch", "spot", "none"] = "as_shot"
