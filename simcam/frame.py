@@ -56,8 +56,38 @@ OPCODE_NAMES = {
 }
 
 
-@dataclass
-class GainMap:
+@dataclass(frozen=True)
+class AreaSpec:
+    """Which pixels an opcode touches (DNG specification 1.7, sec. 7, "area spec"): the first
+    parameters of GainMap and of the opcodes in :mod:`simcam.io.opcode_params`."""
+
+    top: int
+    left: int
+    bottom: int
+    right: int
+    plane: int
+    planes: int
+    row_pitch: int
+    col_pitch: int
+
+    def slices(self, shape: tuple[int, int]) -> tuple[slice, slice]:
+        """Row and column slices of an (H, W) image (an empty rectangle: the whole image)."""
+        h, w = shape
+        if self.bottom <= self.top or self.right <= self.left:
+            t, l, b, r = 0, 0, h, w
+        else:
+            t, l, b, r = max(self.top, 0), max(self.left, 0), min(self.bottom, h), min(self.right, w)
+        # keep the pitch phase of the rectangle's own origin
+        t += (-(t - self.top)) % self.row_pitch if self.bottom > self.top else 0
+        l += (-(l - self.left)) % self.col_pitch if self.right > self.left else 0
+        return slice(t, max(t, b), self.row_pitch), slice(l, max(l, r), self.col_pitch)
+
+    def plane_range(self, n_planes: int) -> range:
+        return range(self.plane, min(self.plane + self.planes, n_planes))
+
+
+@dataclass(frozen=True)
+class GainMap(AreaSpec):
     """A decoded DNG GainMap opcode (DNG 1.6 spec, opcode 9).
 
     Coordinates are in pixels of the image the opcode list applies to (for
@@ -71,14 +101,6 @@ class GainMap:
     bottom, right) with the pitches only selects the pixels the map touches.
     """
 
-    top: int
-    left: int
-    bottom: int
-    right: int
-    plane: int
-    planes: int
-    row_pitch: int
-    col_pitch: int
     map_spacing_v: float
     map_spacing_h: float
     map_origin_v: float
