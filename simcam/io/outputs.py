@@ -87,6 +87,7 @@ def check_output_dir(path: str | Path, *, option: str = "--out", inputs: Iterabl
     Returns
     -------
     Path
+        ``path`` as a :class:`~pathlib.Path` (the folder is not created here).
 
     Raises
     ------
