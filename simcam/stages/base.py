@@ -1,10 +1,12 @@
 """Stage contract and registry.
 
 A stage is a small class with a pydantic ``Params`` model (``extra="forbid"``,
-strict types) that *is* its YAML node, class attributes naming the signal kinds
-it accepts and produces, and a deterministic ``apply``. Stages that draw random
-numbers set ``random = True`` and implement ``sample(rng, frame) -> dict``; the
-pipeline passes what was drawn to ``apply(frame, drawn)``.
+strict types) that *is* its YAML node, class keywords naming its ``type`` and the
+signal kinds it accepts and produces (``class Gamma(Stage, type="gamma", accepts=...,
+produces=...)``), checks of its parameters beyond their types (``check_params``) and
+a deterministic ``apply``. Stages that draw random numbers declare ``random=True`` and
+implement ``sample(rng, frame) -> dict``; the pipeline passes what was drawn to
+``apply(frame, drawn)``.
 """
 
 from __future__ import annotations
