@@ -29,6 +29,14 @@ def read(path: str | Path, *, normalize: bool = True):
     -------
     RawFrame
         ``.data`` (float32 H x W mosaic), ``.meta`` (every tag simcam uses), ``.kind``.
+
+    Examples
+    --------
+    >>> import simcam
+    >>> examples = Path(simcam.__file__).resolve().parents[1] / "examples"
+    >>> raw = read(examples / "data" / "chart.dng", normalize=False)
+    >>> raw.kind, raw.data.dtype.name
+    ('raw_dn', 'float32')
     """
     from .io.dng import read_dng
 

@@ -10,7 +10,24 @@ from __future__ import annotations
 
 
 class SimcamError(Exception):
-    """Base class of every user-facing simcam error (one clear line)."""
+    """Base class of every user-facing simcam error (one clear line).
+
+    Parameters
+    ----------
+    message : str
+        What went wrong; runs of white space (line breaks included) are folded to one space.
+
+    Attributes
+    ----------
+    args : tuple
+        ``(message,)``, the folded one-line message.
+
+    Examples
+    --------
+    >>> from simcam import SimcamError
+    >>> str(SimcamError("photo.dng:   ColorMatrix1:  missing"))
+    'photo.dng: ColorMatrix1: missing'
+    """
 
     def __init__(self, message: str):
         super().__init__(" ".join(str(message).split()))

@@ -30,6 +30,13 @@ SIGNAL_KINDS = ("raw_dn", "raw", "camera_rgb", "xyz", "linear_srgb", "display")
 MOSAIC_KINDS = frozenset({"raw_dn", "raw"})
 RGB_KINDS = frozenset({"camera_rgb", "xyz", "linear_srgb", "display"})
 
+#: CameraMeta's colour matrices and the DNG tags that hold them (DNG specification 1.7, chapter 6)
+COLOUR_MATRIX_TAGS = {
+    "color_matrix1": "ColorMatrix1", "color_matrix2": "ColorMatrix2",
+    "camera_calibration1": "CameraCalibration1", "camera_calibration2": "CameraCalibration2",
+    "forward_matrix1": "ForwardMatrix1", "forward_matrix2": "ForwardMatrix2",
+}
+
 #: DNG opcode ids -> names (DNG 1.6 specification, chapter 7).
 OPCODE_NAMES = {
     1: "WarpRectilinear",
@@ -49,8 +56,38 @@ OPCODE_NAMES = {
 }
 
 
-@dataclass
-class GainMap:
+@dataclass(frozen=True)
+class AreaSpec:
+    """Which pixels an opcode touches (DNG specification 1.7, sec. 7, "area spec"): the first
+    parameters of GainMap and of the opcodes in :mod:`simcam.io.opcode_params`."""
+
+    top: int
+    left: int
+    bottom: int
+    right: int
+    plane: int
+    planes: int
+    row_pitch: int
+    col_pitch: int
+
+    def slices(self, shape: tuple[int, int]) -> tuple[slice, slice]:
+        """Row and column slices of an (H, W) image (an empty rectangle: the whole image)."""
+        h, w = shape
+        if self.bottom <= self.top or self.right <= self.left:
+            t, l, b, r = 0, 0, h, w
+        else:
+            t, l, b, r = max(self.top, 0), max(self.left, 0), min(self.bottom, h), min(self.right, w)
+        # keep the pitch phase of the rectangle's own origin
+        t += (-(t - self.top)) % self.row_pitch if self.bottom > self.top else 0
+        l += (-(l - self.left)) % self.col_pitch if self.right > self.left else 0
+        return slice(t, max(t, b), self.row_pitch), slice(l, max(l, r), self.col_pitch)
+
+    def plane_range(self, n_planes: int) -> range:
+        return range(self.plane, min(self.plane + self.planes, n_planes))
+
+
+@dataclass(frozen=True)
+class GainMap(AreaSpec):
     """A decoded DNG GainMap opcode (DNG 1.6 spec, opcode 9).
 
     Coordinates are in pixels of the image the opcode list applies to (for
@@ -64,14 +101,6 @@ class GainMap:
     bottom, right) with the pitches only selects the pixels the map touches.
     """
 
-    top: int
-    left: int
-    bottom: int
-    right: int
-    plane: int
-    planes: int
-    row_pitch: int
-    col_pitch: int
     map_spacing_v: float
     map_spacing_h: float
     map_origin_v: float
@@ -132,6 +161,30 @@ class CameraMeta:
     pairs of ``var = S * x + O`` on normalised raw (one pair, or one per CFA
     plane). ``origin`` is the (row, col) position of ``data[0, 0]`` in the full
     stored raw image; crops update it.
+
+    Parameters
+    ----------
+    make, model, unique_camera_model : str
+        Make, Model and UniqueCameraModel tags.
+    cfa : str or None
+        2x2 Bayer pattern of pixel (0, 0) (``"RGGB"``...); None for a mosaic of unknown layout.
+    black_level, white_level : ndarray, float
+        BlackLevel (DN, ``black_level_repeat_dim``) and WhiteLevel (DN).
+    **fields
+        Every other tag, by its field name (see the class body); all have defaults.
+
+    Attributes
+    ----------
+    fields
+        As the parameters; :meth:`to_dict` gives them JSON-friendly, :meth:`replace` a changed copy.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from simcam import CameraMeta
+    >>> meta = CameraMeta(cfa="BGGR", black_level=np.full((1, 1), 64.0), white_level=1023.0)
+    >>> meta.cfa, meta.white_level, meta.replace(iso=800.0).iso
+    ('BGGR', 1023.0, 800.0)
     """
 
     make: str = ""
@@ -270,6 +323,21 @@ class RawFrame:
         Metadata; stages that change geometry or colour state update a copy.
     kind : str
         One of :data:`SIGNAL_KINDS`.
+
+    Attributes
+    ----------
+    data, meta, kind
+        As the parameters (``data`` converted to float32 and checked against ``kind``).
+    history : list of str
+        The stages the frame went through.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from simcam import CameraMeta, RawFrame
+    >>> frame = RawFrame(np.zeros((4, 6)), CameraMeta(cfa="RGGB"), kind="raw")
+    >>> frame.data.dtype.name, frame.height, frame.width
+    ('float32', 4, 6)
     """
 
     data: np.ndarray

@@ -16,7 +16,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "simcam"
 
 # Lowest first. A module may import modules of its own layer or of lower ones (never a cycle).
 LAYERS: list[tuple[str, ...]] = [
-    ("errors", "yamlio", "parallel"),
+    ("errors", "yamlio", "parallel", "registry"),
     ("cfa",),
     ("frame", "raw"),
     ("io", "colour", "demosaic", "noise"),

@@ -401,7 +401,7 @@ def _read_sidd_dir(d: Path) -> Sequence:
     ``*METADATA_RAW_*.MAT`` tags (Abdelhamed et al., CVPR 2018). The .MAT images (variable
     ``x``) are normalised raw in [0, 1]; they are turned back into DN with the metadata's black
     and white levels."""
-    from ..io.matlab import load_mat
+    from ..io.sidd import read_sidd_image as image
     from ..io.sidd import read_sidd_meta
     from ..raw import black_level_map
 
@@ -412,14 +412,6 @@ def _read_sidd_dir(d: Path) -> Sequence:
     if not metas:
         raise DatasetError(f"{d}: SIDD scene without *METADATA_RAW_*.MAT; expected the tag file beside the frames")
     meta = read_sidd_meta(metas[0])
-
-    def image(path):
-        v = load_mat(path, DatasetError)
-        x = v.get("x", next((a for a in v.values() if isinstance(a, np.ndarray) and a.ndim == 2), None))
-        if x is None or np.ndim(x) != 2:
-            raise DatasetError(f"{path}: no 2-D image variable 'x'; expected a SIDD RAW .MAT")
-        return np.asarray(x, dtype=np.float64)
-
     noisy = [image(p) for p in find("NOISY_RAW")]
     for p, x in zip(find("NOISY_RAW"), noisy):
         if x.shape != noisy[0].shape:
@@ -533,20 +525,11 @@ def read_emva1288(descriptor: str | Path, *, region=None, progress: bool | None 
 
 def _read_png(path: Path, shape: tuple[int, int]) -> np.ndarray:
     """One monochrome image (PNG / TIFF) through OpenImageIO, stored values unscaled."""
-    import OpenImageIO as oiio
+    from ..io.images import decode_image
 
     if not path.exists():
         raise DatasetError(f"{path}: image listed in the descriptor not found")
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        raise DatasetError(f"{path}: cannot read image ({oiio.geterror()})")
-    try:
-        spec = inp.spec()
-        arr = inp.read_image(0, 0, 0, 1, spec.format)
-    finally:
-        inp.close()
-    if arr is None:
-        raise DatasetError(f"{path}: cannot decode image pixels")
+    arr, spec = decode_image(path, channels=1, error=DatasetError, undecodable="cannot decode image pixels")
     arr = np.asarray(arr)[..., 0] if np.ndim(arr) == 3 else np.asarray(arr)
     if spec.nchannels != 1:
         raise DatasetError(f"{path}: {spec.nchannels} channels; expected a monochrome image")

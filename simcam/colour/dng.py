@@ -45,6 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import MetadataError
+from ..frame import COLOUR_MATRIX_TAGS
 
 #: D50 white of the DNG profile connection space, CIE 1931 2 deg xy (DNG SDK ``D50_xy_coord``).
 D50_XY = np.array([0.3457, 0.3585])
@@ -87,23 +88,28 @@ def _planck_xy(cct: float) -> tuple[float, float]:
 _A, _B, _C = (0.44757, 0.40745), (0.34842, 0.35161), (0.31006, 0.31616)
 _D50, _D55, _D65, _D75 = (0.34567, 0.35850), (0.33242, 0.34743), (0.31271, 0.32902), (0.29902, 0.31485)
 
+def _planckian(code: int, name: str, cct: float) -> LightSource:
+    """A light source whose xy is the Planckian locus at its CCT."""
+    return LightSource(code, name, cct, _planck_xy(cct))
+
+
 #: EXIF 2.3 LightSource codes (DNG CalibrationIlluminant values). CCTs are those of the
 #: Adobe DNG SDK (``dng_camera_profile::IlluminantToTemperature``); xy is the CIE
 #: standard illuminant the code names (or whose CCT the SDK assigns), and for the
 #: fluorescent classes and ISO studio tungsten the Planckian locus at that CCT.
 LIGHT_SOURCES: dict[int, LightSource] = {ls.code: ls for ls in (
     LightSource(1, "Daylight", 5500.0, _D55),
-    LightSource(2, "Fluorescent", 4200.0, _planck_xy(4200.0)),
+    _planckian(2, "Fluorescent", 4200.0),
     LightSource(3, "Tungsten (incandescent light)", 2850.0, _A),
     LightSource(4, "Flash", 5500.0, _D55),
     LightSource(9, "Fine weather", 5500.0, _D55),
     LightSource(10, "Cloudy weather", 6500.0, _D65),
     LightSource(11, "Shade", 7500.0, _D75),
-    LightSource(12, "Daylight fluorescent (D 5700-7100K)", 6400.0, _planck_xy(6400.0)),
-    LightSource(13, "Day white fluorescent (N 4600-5400K)", 5000.0, _planck_xy(5000.0)),
-    LightSource(14, "Cool white fluorescent (W 3900-4500K)", 4200.0, _planck_xy(4200.0)),
-    LightSource(15, "White fluorescent (WW 3200-3700K)", 3450.0, _planck_xy(3450.0)),
-    LightSource(16, "Warm white fluorescent (L 2600-3250K)", 2925.0, _planck_xy(2925.0)),
+    _planckian(12, "Daylight fluorescent (D 5700-7100K)", 6400.0),
+    _planckian(13, "Day white fluorescent (N 4600-5400K)", 5000.0),
+    _planckian(14, "Cool white fluorescent (W 3900-4500K)", 4200.0),
+    _planckian(15, "White fluorescent (WW 3200-3700K)", 3450.0),
+    _planckian(16, "Warm white fluorescent (L 2600-3250K)", 2925.0),
     LightSource(17, "Standard light A", 2850.0, _A),
     LightSource(18, "Standard light B", 5500.0, _B),
     LightSource(19, "Standard light C", 6500.0, _C),
@@ -111,7 +117,7 @@ LIGHT_SOURCES: dict[int, LightSource] = {ls.code: ls for ls in (
     LightSource(21, "D65", 6500.0, _D65),
     LightSource(22, "D75", 7500.0, _D75),
     LightSource(23, "D50", 5000.0, _D50),
-    LightSource(24, "ISO studio tungsten", 3200.0, _planck_xy(3200.0)),
+    _planckian(24, "ISO studio tungsten", 3200.0),
 )}
 
 
@@ -221,9 +227,7 @@ def bradford_matrix(xyz_src, xyz_dst) -> np.ndarray:
 # -- the profile -----------------------------------------------------------------------
 
 _TAG_NAMES = {
-    "color_matrix1": "ColorMatrix1", "color_matrix2": "ColorMatrix2",
-    "camera_calibration1": "CameraCalibration1", "camera_calibration2": "CameraCalibration2",
-    "forward_matrix1": "ForwardMatrix1", "forward_matrix2": "ForwardMatrix2",
+    **COLOUR_MATRIX_TAGS,
     "analog_balance": "AnalogBalance", "as_shot_neutral": "AsShotNeutral",
     "as_shot_white_xy": "AsShotWhiteXY",
 }
@@ -296,8 +300,7 @@ class DngColorProfile:
             raise MetadataError(
                 f"{src}: ColorMatrix1: missing; expected a 3x3 XYZ->camera matrix (required for colour rendering)")
         mats = {}
-        for name in ("color_matrix1", "color_matrix2", "camera_calibration1", "camera_calibration2",
-                     "forward_matrix1", "forward_matrix2"):
+        for name in COLOUR_MATRIX_TAGS:
             value = getattr(meta, name, None)
             mats[name] = None if value is None else check_matrix(value, _TAG_NAMES[name], src)
         ab = getattr(meta, "analog_balance", None)

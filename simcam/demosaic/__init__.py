@@ -23,7 +23,33 @@ DEMOSAIC_METHODS = {
 
 
 def demosaic(mosaic, cfa: str, method: str = "malvar2004"):
-    """Dispatch to one of :data:`DEMOSAIC_METHODS` (H x W mosaic -> H x W x 3 float32)."""
+    """Demosaic a Bayer mosaic with one of :data:`DEMOSAIC_METHODS`.
+
+    Parameters
+    ----------
+    mosaic : ndarray
+        H x W Bayer mosaic (H, W >= 2).
+    cfa : str
+        "RGGB", "BGGR", "GRBG" or "GBRG".
+    method : str
+        A key of :data:`DEMOSAIC_METHODS`: ``"bilinear"``, ``"malvar2004"`` or ``"menon2007"``.
+
+    Returns
+    -------
+    ndarray
+        H x W x 3 float32 RGB in the units of ``mosaic``.
+
+    Raises
+    ------
+    StageError
+        ``method`` is not one of :data:`DEMOSAIC_METHODS`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> demosaic(np.full((4, 4), 0.5, np.float32), "RGGB", method="bilinear").shape
+    (4, 4, 3)
+    """
     from ..errors import StageError
 
     try:

@@ -39,6 +39,13 @@ def demosaic_bilinear(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
     Losson et al. 2010, doi:10.1016/S1076-5670(10)62005-8. Equals
     ``colour_demosaicing.demosaicing_CFA_Bayer_bilinear`` away from the 1-pixel
     border (and everywhere on a phase-preserving mirror-padded mosaic).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rgb = demosaic_bilinear(np.full((6, 8), 0.25), "GRBG")
+    >>> rgb.shape, bool(np.allclose(rgb, 0.25))
+    ((6, 8, 3), True)
     """
     m, cfa, planes, h2, w2, rgb, rows = strip_setup(mosaic, cfa, "bilinear")
     h, w = m.shape

@@ -44,6 +44,13 @@ def demosaic_malvar2004(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
     Malvar, He & Cutler, ICASSP 2004, doi:10.1109/ICASSP.2004.1326587. Equals
     ``colour_demosaicing.demosaicing_CFA_Bayer_Malvar2004`` away from the 2-pixel
     border (and everywhere on a phase-preserving mirror-padded mosaic).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> mosaic = np.arange(36, dtype=np.float32).reshape(6, 6) / 36
+    >>> float(demosaic_malvar2004(mosaic, "RGGB")[0, 0, 0]) == float(mosaic[0, 0])  # red at (0, 0) kept
+    True
     """
     m, cfa, planes, h2, w2, rgb, rows = strip_setup(mosaic, cfa, "malvar2004")
     h, w = m.shape
@@ -110,17 +117,12 @@ def _green_site(nb, c, out, horiz, vert, t1, t2, t3, t4, t5):
     t2 -= t1  # base = 5c - Dg
     np.add(nb(0, -2), nb(0, 2), out=t3)  # H2
     np.add(nb(-2, 0), nb(2, 0), out=t4)  # V2
-    np.add(nb(0, -1), nb(0, 1), out=t1)  # H1
-    t1 *= 4.0
-    t1 += t2
-    t1 -= t3
-    np.multiply(t4, 0.5, out=t5)
-    t1 += t5
-    np.multiply(t1, 0.125, out=out[..., horiz])
-    np.add(nb(-1, 0), nb(1, 0), out=t1)  # V1
-    t1 *= 4.0
-    t1 += t2
-    t1 -= t4
-    np.multiply(t3, 0.5, out=t5)
-    t1 += t5
-    np.multiply(t1, 0.125, out=out[..., vert])
+    # 8 Hc from H1 (the pair at (0, +-1)), 8 Vc from V1 (at (+-1, 0)): the same formula with H2 and V2 swapped
+    for (a, b), same, other, where in ((((0, -1), (0, 1)), t3, t4, horiz), (((-1, 0), (1, 0)), t4, t3, vert)):
+        np.add(nb(*a), nb(*b), out=t1)
+        t1 *= 4.0
+        t1 += t2
+        t1 -= same
+        np.multiply(other, 0.5, out=t5)
+        t1 += t5
+        np.multiply(t1, 0.125, out=out[..., where])

@@ -107,24 +107,23 @@ def _refine(R, G, B, R_m, G_m, B_m, M, cnv_h, cnv_v):
     B_c = np.broadcast_to(np.any(B_m, axis=0)[None], B.shape)
     R_G = R - G
     B_G = B - G
-    c = G_m & B_r
-    R_G_m = np.where(c, cnv_v(R_G, _KB), R_G_m)
-    R = np.where(c, G + R_G_m, R)
-    c = G_m & B_c
-    R_G_m = np.where(c, cnv_h(R_G, _KB), R_G_m)
-    R = np.where(c, G + R_G_m, R)
-    c = G_m & R_r
-    B_G_m = np.where(c, cnv_v(B_G, _KB), B_G_m)
-    B = np.where(c, G + B_G_m, B)
-    c = G_m & R_c
-    B_G_m = np.where(c, cnv_h(B_G, _KB), B_G_m)
-    B = np.where(c, G + B_G_m, B)
+    R = _at_green(R, R_G, R_G_m, G, (G_m & B_r, cnv_v), (G_m & B_c, cnv_h))
+    B = _at_green(B, B_G, B_G_m, G, (G_m & R_r, cnv_v), (G_m & R_c, cnv_h))
     R_B = R - B
     R_B_m = np.where(B_m, np.where(M, cnv_h(R_B, _FIR), cnv_v(R_B, _FIR)), zero)
     R = np.where(B_m, B + R_B_m, R)
     R_B_m = np.where(R_m, np.where(M, cnv_h(R_B, _FIR), cnv_v(R_B, _FIR)), zero)
     B = np.where(R_m, R - R_B_m, B)
     return R, G, B
+
+
+def _at_green(X, X_G, X_G_m, G, *steps):
+    """The refining step's update of colour X at green sites: for each ``(sites, cnv)`` in turn, X - G
+    smoothed by ``cnv`` (along the line of the same colour) replaces the current estimate there."""
+    for sites, cnv in steps:
+        X_G_m = np.where(sites, cnv(X_G, _KB), X_G_m)
+        X = np.where(sites, G + X_G_m, X)
+    return X
 
 
 def demosaic_menon2007(mosaic: np.ndarray, cfa: str = "RGGB", *, refining_step: bool = True) -> np.ndarray:
@@ -143,6 +142,13 @@ def demosaic_menon2007(mosaic: np.ndarray, cfa: str = "RGGB", *, refining_step: 
     -------
     ndarray
         H x W x 3 float32, not clipped.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> out = demosaic_menon2007(np.ones((8, 8), np.float32), "BGGR", refining_step=False)
+    >>> out.dtype.name, out.shape
+    ('float32', (8, 8, 3))
     """
     from ..parallel import run_bands
 

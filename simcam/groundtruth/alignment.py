@@ -157,6 +157,15 @@ def phase_correlation(ref: np.ndarray, mov: np.ndarray, *, upsample: int = 4, wi
     ncc : ndarray, (...)
         Normalised cross-correlation at the peak, in [-1, 1]: compare it with
         :func:`ncc_threshold` to tell a real match from a noise maximum.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from scipy import ndimage
+    >>> ref = ndimage.gaussian_filter(np.random.default_rng(0).random((32, 32)), 2)
+    >>> shift, ncc = phase_correlation(ref, np.roll(ref, (1, 2), axis=(0, 1)))
+    >>> shift.round().tolist(), bool(ncc > 0.9)
+    ([1.0, 2.0], True)
     """
     ref = np.asarray(ref)
     mov = np.asarray(mov)
@@ -228,6 +237,28 @@ def patch_grid(shape: tuple[int, int], cfa: str | None, *, patch: int = 512, str
     along the short side, the patch shrinks to the largest power of two that
     gives two (never below ``min_patch`` registration pixels, and never above
     the image: then one patch covers it and the alignment is global).
+
+    Parameters
+    ----------
+    shape : (int, int)
+        Mosaic size H x W.
+    cfa : str or None
+        Bayer pattern (the registration image is half size) or None.
+    patch, stride : int
+        Patch size and stride, mosaic pixels (stride: patch / 2 by default).
+    min_patch : int
+        Smallest patch, registration pixels.
+
+    Returns
+    -------
+    PatchGrid
+        Patch size and stride (registration pixels), patch origins ``ys``, ``xs`` and the pixel pitch.
+
+    Examples
+    --------
+    >>> g = patch_grid((64, 64), "RGGB", patch=32)
+    >>> g.size, g.stride, g.centres.shape
+    (16, 8, (9, 2))
     """
     step = plane_step(cfa)
     hl, wl = shape[0] // step, shape[1] // step
@@ -256,7 +287,31 @@ class Reference:
 
 def prepare_reference(ref: np.ndarray, cfa: str | None, *, patch: int = 512, stride: int | None = None,
                       upsample: int = 4, window: bool = True, normalization: str | None = None) -> Reference:
-    """Precompute the reference's patch spectra (eq. 5.5 chooses the frame)."""
+    """Precompute the reference's patch spectra (eq. 5.5 chooses the frame).
+
+    Parameters
+    ----------
+    ref : ndarray, H x W
+        The reference frame (normalised raw).
+    cfa : str or None
+        Bayer pattern.
+    patch, stride
+        As :func:`patch_grid`.
+    upsample, window, normalization
+        As :func:`phase_correlation`.
+
+    Returns
+    -------
+    Reference
+        The grid and the spectra that :func:`local_shifts` and :func:`global_shift` compare frames with.
+
+    Examples
+    --------
+    >>> from simcam.groundtruth import SyntheticBurst
+    >>> sb = SyntheticBurst(shape=(64, 64), n=2, drift_px=0.0, seed=0)
+    >>> prepare_reference(sb.frame(0), "RGGB", patch=32).grid.size
+    16
+    """
     img = luma(ref, cfa)
     grid = patch_grid(ref.shape, cfa, patch=patch, stride=stride)
     return Reference(grid, _prepare(grid.extract(img), window), _prepare(img[None], window)[0],
@@ -268,6 +323,28 @@ def local_shifts(reference: Reference, frame: np.ndarray) -> tuple[np.ndarray, n
 
     Returns landmarks (L, 2) and shifts (L, 2) in mosaic pixels, and a boolean
     (L,) ``reliable``: the patch's correlation peak exceeds :func:`ncc_threshold`.
+
+    Parameters
+    ----------
+    reference : Reference
+        From :func:`prepare_reference`.
+    frame : ndarray, H x W
+        The frame to register.
+
+    Returns
+    -------
+    landmarks, shifts : ndarray, (L, 2)
+        Patch centres and shifts, mosaic pixels.
+    reliable : ndarray of bool, (L,)
+        Whether each patch's match is real.
+
+    Examples
+    --------
+    >>> from simcam.groundtruth import SyntheticBurst
+    >>> sb = SyntheticBurst(shape=(64, 64), n=2, drift_px=0.0, seed=0)
+    >>> lm, sh, ok = local_shifts(prepare_reference(sb.frame(0), "RGGB", patch=32), sb.frame(1))
+    >>> lm.shape, bool(abs(sh).max() < 0.5), bool(ok.all())
+    ((9, 2), True, True)
     """
     img = luma(frame, reference.cfa)
     Fm = _prepare(reference.grid.extract(img), reference.window)
@@ -279,7 +356,28 @@ def local_shifts(reference: Reference, frame: np.ndarray) -> tuple[np.ndarray, n
 
 
 def global_shift(reference: Reference, frame: np.ndarray) -> tuple[np.ndarray, bool]:
-    """One (row, col) shift of the whole frame against the reference (mosaic pixels), and its reliability."""
+    """One (row, col) shift of the whole frame against the reference (mosaic pixels), and its reliability.
+
+    Parameters
+    ----------
+    reference, frame
+        As :func:`local_shifts`.
+
+    Returns
+    -------
+    shift : ndarray, (2,)
+        (row, col) shift, mosaic pixels.
+    reliable : bool
+        Whether the correlation peak is a real match.
+
+    Examples
+    --------
+    >>> from simcam.groundtruth import SyntheticBurst
+    >>> sb = SyntheticBurst(shape=(64, 64), n=2, drift_px=0.0, seed=0)
+    >>> shift, ok = global_shift(prepare_reference(sb.frame(0), "RGGB", patch=32), sb.frame(1))
+    >>> bool(abs(shift).max() < 0.5), ok
+    (True, True)
+    """
     img = luma(frame, reference.cfa)
     Fm = _prepare(img[None], reference.window)
     s, ncc = phase_correlation_spectra(reference.F_whole[None], Fm, upsample=reference.upsample,
@@ -329,6 +427,32 @@ def dense_field(landmarks: np.ndarray, shifts: np.ndarray, shape: tuple[int, int
     fields met in bursts). The spline is evaluated on a ``field_step`` grid and
     linearly interpolated from there. Fewer than 3 landmarks (or all on a line)
     fall back to the mean shift or, on a line, a 1-D linear interpolation.
+
+    Parameters
+    ----------
+    landmarks, shifts : ndarray, (L, 2)
+        As :func:`local_shifts` gives them.
+    shape : (int, int)
+        Mosaic size H x W.
+    cfa : str or None
+        Bayer pattern.
+    smoothing : float
+        Smoothing of the thin-plate spline.
+    field_step : int
+        Pitch of the grid the spline is evaluated on.
+
+    Returns
+    -------
+    ndarray
+        (2, h_p, w_p) float32 field.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> lm = np.array([[8.0, 8.0], [8.0, 56.0], [56.0, 8.0], [56.0, 56.0]])
+    >>> d = dense_field(lm, np.full((4, 2), 0.5), (64, 64), "RGGB")
+    >>> d.shape, bool(np.allclose(d, 0.5, atol=1e-4))
+    ((2, 32, 32), True)
     """
     step = plane_step(cfa)
     H, W = shape
@@ -382,6 +506,31 @@ def warp(data: np.ndarray, field: np.ndarray, cfa: str | None, *, order: int = 3
     ``order`` is the spline order of :func:`scipy.ndimage.map_coordinates`
     (3: cubic, 1: linear, 0: nearest, used for censoring flags); outside the
     frame the nearest edge sample is repeated.
+
+    Parameters
+    ----------
+    data : ndarray, H x W
+        The mosaic.
+    field : ndarray, (2, h_p, w_p)
+        From :func:`dense_field`.
+    cfa : str or None
+        Bayer pattern.
+    order, mode : int, str
+        Spline order and edge mode of :func:`scipy.ndimage.map_coordinates`.
+    threads : int
+        Planes warped in parallel.
+
+    Returns
+    -------
+    ndarray
+        The warped mosaic (float32).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> mosaic = np.random.default_rng(0).random((8, 8)).astype(np.float32)
+    >>> bool(np.allclose(warp(mosaic, np.zeros((2, 4, 4), np.float32), "RGGB"), mosaic, atol=1e-6))
+    True
     """
     step = plane_step(cfa)
     out = np.empty(data.shape, dtype=np.float32 if order else data.dtype)

@@ -69,6 +69,18 @@ class Burst:
         are censored). From metadata when known: ``-black/(white-black)`` and 1.
     nan_policy : {"raise", "omit"}
         NaN in a frame raises :class:`DatasetError` (default) or marks missing samples.
+
+    Attributes
+    ----------
+    settings : FrameSettings or None
+        ISO, exposure and size shared by the frames (from their metadata), once checked.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> burst = Burst.from_arrays([np.full((4, 4), 0.2 + 0.01 * i) for i in range(3)], cfa="RGGB")
+    >>> len(burst), round(float(burst.load(2).mean()), 2)
+    (3, 0.22)
     """
 
     loaders: Sequence[Callable[[], object]]
@@ -160,8 +172,7 @@ class Burst:
         """A SIDD scene instance (Abdelhamed, Lin & Brown, CVPR 2018): ``*_NOISY_RAW_NNN.MAT`` frames
         (variable ``x``: normalised raw in [0, 1], black subtracted) and the ``*_METADATA_RAW_*.MAT`` tag
         file (CFA); the ``*_GT_RAW_*`` reference is not a frame."""
-        from ..io.matlab import load_mat
-        from ..io.sidd import read_sidd_meta
+        from ..io.sidd import read_sidd_image, read_sidd_meta
 
         files = sorted(p for p in path.iterdir() if is_sidd_frame(p))
         metas = sorted(p for p in path.iterdir() if "METADATA_RAW" in p.name.upper() and p.suffix.upper() == ".MAT")
@@ -171,11 +182,7 @@ class Burst:
         meta = read_sidd_meta(metas[0])
 
         def load(p):
-            v = load_mat(p, DatasetError)
-            x = v.get("x", next((a for a in v.values() if isinstance(a, np.ndarray) and a.ndim == 2), None))
-            if x is None or np.ndim(x) != 2:
-                raise DatasetError(f"{p}: no 2-D image variable 'x'; expected a SIDD NOISY_RAW .MAT")
-            return np.asarray(x, dtype=np.float32)
+            return read_sidd_image(p, dtype=np.float32, what="NOISY_RAW")
 
         return cls([(lambda p=p: load(p)) for p in files], [str(p) for p in files], cfa=meta.cfa,
                    clip_low=0.0, clip_high=1.0, meta=meta, **kw)
@@ -244,15 +251,6 @@ class Burst:
 
 def _read_native(path: Path) -> np.ndarray:
     """An image's samples in their stored type (DN), via OpenImageIO."""
-    import OpenImageIO as oiio
+    from ..io.images import decode_image
 
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        raise DatasetError(f"{path}: cannot read image ({oiio.geterror()})")
-    try:
-        data = inp.read_image(inp.spec().format)
-    finally:
-        inp.close()
-    if data is None:
-        raise DatasetError(f"{path}: cannot decode image")
-    return np.asarray(data)
+    return np.asarray(decode_image(path, error=DatasetError)[0])

@@ -30,6 +30,28 @@ class DefectMap:
 
     ``stats`` holds, per CFA plane, the fitted ``mu`` and ``sigma`` (normalised
     raw) and the interval limits used.
+
+    Parameters
+    ----------
+    mask : ndarray of bool, H x W
+        True at a defective pixel.
+    source : str
+        How it was found (a file, ``dark``, ``flat``).
+    stats : list of dict
+        Per CFA plane: the fitted ``mu``, ``sigma`` and the interval limits.
+
+    Attributes
+    ----------
+    mask, source, stats
+        As the parameters; ``count`` is the number of defective pixels.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> m = np.zeros((4, 4), bool)
+    >>> m[1, 2] = True
+    >>> (DefectMap(m, "dark") | DefectMap(m.T, "flat")).count
+    2
     """
 
     mask: np.ndarray
@@ -56,6 +78,25 @@ def fit_gaussian_wls(values: np.ndarray, *, max_points: int = 200_000) -> tuple[
     For more than ``max_points`` values the fit uses ``max_points`` evenly spaced
     order statistics (the empirical CDF sampled at their plotting positions),
     which leaves the estimate unchanged to well below its standard error.
+
+    Parameters
+    ----------
+    values : ndarray
+        The sample (any shape; flattened).
+    max_points : int
+        Most order statistics the fit uses.
+
+    Returns
+    -------
+    (float, float)
+        ``mu`` and ``sigma``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> mu, sigma = fit_gaussian_wls(np.random.default_rng(2).normal(1.0, 0.1, 5000))
+    >>> round(mu, 2), round(sigma, 2)
+    (1.0, 0.1)
     """
     v = np.asarray(values, dtype=np.float64).ravel()
     v = v[np.isfinite(v)]
@@ -110,6 +151,19 @@ def detect_defects_dark(dark_mean: np.ndarray, cfa: str | None, *, confidence: f
         (Abdelhamed 2020: 0.999, i.e. |x - mu| > 3.29 sigma is defective).
     side : {"both", "high", "low"}
         Which tail is flagged (hot/stuck are high, dead are low).
+
+    Returns
+    -------
+    DefectMap
+        The flagged pixels, with the fitted Gaussian of each CFA plane in ``stats``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> dark = np.random.default_rng(0).normal(0.01, 0.001, (16, 16)).astype(np.float32)
+    >>> dark[5, 6] = 0.2  # a hot pixel
+    >>> np.argwhere(detect_defects_dark(dark, "RGGB").mask).tolist()
+    [[5, 6]]
     """
     return _flag(dark_mean, cfa, confidence, side, "dark", residual=False)
 
@@ -120,6 +174,26 @@ def detect_hot_flat(flat_mean: np.ndarray, cfa: str | None, *, confidence: float
 
     The smooth shading is removed by a 7x7 median per CFA plane first; the
     residual is fitted and thresholded like :func:`detect_defects_dark`.
+
+    Parameters
+    ----------
+    flat_mean : ndarray, H x W
+        Mean of the flat frames, normalised raw.
+    cfa, confidence, side
+        As :func:`detect_defects_dark`.
+
+    Returns
+    -------
+    DefectMap
+        Pixels outside the interval of their plane's shading residual.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> flat = 0.5 + np.random.default_rng(1).normal(0, 0.001, (16, 16)).astype(np.float32)
+    >>> flat[9, 4] = 0.9
+    >>> bool(detect_hot_flat(flat, "RGGB").mask[9, 4])
+    True
     """
     return _flag(flat_mean, cfa, confidence, side, "flat", residual=True)
 
@@ -191,6 +265,28 @@ def correct_defects(data: np.ndarray, mask: np.ndarray, cfa: str | None) -> np.n
     Exact for images cubic along rows and columns (see tests).
 
     Returns a new float32 array (the input is not modified).
+
+    Parameters
+    ----------
+    data : ndarray, H x W
+        The mosaic (normalised raw).
+    mask : ndarray of bool, H x W
+        True at a defective pixel.
+    cfa : str or None
+        Bayer pattern (None: one plane).
+
+    Returns
+    -------
+    ndarray
+        A corrected copy of ``data``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> mosaic = np.full((8, 8), 0.25, np.float32)
+    >>> mosaic[3, 3] = 1.0
+    >>> float(correct_defects(mosaic, mosaic > 0.5, "RGGB")[3, 3])
+    0.25
     """
     if mask.shape != data.shape:
         raise DatasetError(f"defect map: shape {mask.shape} does not match the frame {data.shape}")
@@ -218,7 +314,28 @@ def mean_image(frames: Iterable[np.ndarray]) -> tuple[np.ndarray, int]:
 
 
 def save_defect_map(path: str | Path, dm: DefectMap) -> Path:
-    """Save as ``.npz``: ``mask`` (bool H x W), ``source``, ``stats`` (JSON)."""
+    """Save as ``.npz``: ``mask`` (bool H x W), ``source``, ``stats`` (JSON).
+
+    Parameters
+    ----------
+    path : path
+        The ``.npz`` to write.
+    dm : DefectMap
+        The map.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> import numpy as np
+    >>> out = save_defect_map(tempfile.mkdtemp() + "/defects.npz", DefectMap(np.eye(4, dtype=bool), "dark"))
+    >>> load_defect_map(out, (4, 4)).count
+    4
+    """
     import json
 
     path = Path(path)
@@ -231,6 +348,26 @@ def load_defect_map(path: str | Path, shape: tuple[int, int] | None = None) -> D
 
     The SIDD file holds ``DefectivePixelsMask`` (uint8, H x W, nonzero =
     defective). ``shape`` (H, W), if given, must match.
+
+    Parameters
+    ----------
+    path : path
+        A ``.npz`` written by :func:`save_defect_map` or a SIDD ``.mat``.
+    shape : (int, int), optional
+        The size the map must have.
+
+    Returns
+    -------
+    DefectMap
+        The map, ``source`` naming the file.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> import numpy as np
+    >>> path = save_defect_map(tempfile.mkdtemp() + "/d.npz", DefectMap(np.zeros((2, 6), bool), "flat"))
+    >>> load_defect_map(path).mask.shape
+    (2, 6)
     """
     import json
 

@@ -36,7 +36,28 @@ _EPS = 1e-6
 
 @dataclass
 class GroundTruthConfig:
-    """Settings of :func:`estimate_ground_truth` (defaults follow Abdelhamed 2020 where it says)."""
+    """Settings of :func:`estimate_ground_truth` (defaults follow Abdelhamed 2020 where it says).
+
+    Parameters
+    ----------
+    method, refine, uncensored_mean, nlf, min_samples, alignment, patch, stride, upsample, normalization
+        The robust mean and the alignment (see the comments on the fields).
+    tps_smoothing, outlier_px, interp_order, intensity, drop_outliers, outlier_confidence
+        The warp and the frame-intensity steps.
+    robust_outliers, defect_confidence, ...
+        The outlier and defect intervals, and the remaining fields (all with defaults).
+
+    Attributes
+    ----------
+    fields
+        As the parameters; :meth:`check` validates them.
+
+    Examples
+    --------
+    >>> cfg = GroundTruthConfig(method="mle", alignment="global")
+    >>> cfg.method, cfg.patch, cfg.outlier_confidence
+    ('mle', 512, 0.999)
+    """
 
     method: str = "wls"               #: robust mean: wls (Abdelhamed 2020), mle (censored MLE) or mean (plain)
     refine: int = 0                   #: Gauss-Newton steps on eq. 5.10 after the closed form (wls)
@@ -142,6 +163,19 @@ class GroundTruth:
         Index of the reference frame in the burst (eq. 5.5).
     report : dict
         JSON-friendly account of every step.
+
+    Parameters
+    ----------
+    gt, sigma, valid, defects, n_used, reference, report
+        As the attributes.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> z = np.zeros((2, 2), np.float32)
+    >>> g = GroundTruth(z, z, np.ones((2, 2), bool), np.zeros((2, 2), bool), np.full((2, 2), 5, np.int16), 0)
+    >>> g.reference, int(g.n_used.sum())
+    (0, 20)
     """
 
     gt: np.ndarray
@@ -179,7 +213,29 @@ def _close(bar) -> None:
 
 
 def stream_mean(burst: Burst, shape: tuple[int, int] | None = None, what: str = "dark") -> np.ndarray:
-    """Mean image of a burst (float32), one frame at a time; checks the size against ``shape``."""
+    """Mean image of a burst (float32), one frame at a time; checks the size against ``shape``.
+
+    Parameters
+    ----------
+    burst : Burst
+        The frames (a dark or a flat sequence).
+    shape : (int, int), optional
+        The size every frame must have (that of the burst to estimate).
+    what : str
+        What the burst is, for the error message.
+
+    Returns
+    -------
+    ndarray
+        float32 H x W mean of the frames.
+
+    Examples
+    --------
+    >>> darks = Burst.from_arrays([np.full((4, 4), v) for v in (0.1, 0.3)], cfa="RGGB")
+    >>> m = stream_mean(darks, (4, 4))
+    >>> m.shape, round(float(m.mean()), 3)
+    ((4, 4), 0.2)
+    """
     acc = None
     for i in range(len(burst)):
         x = burst.load(i)

@@ -39,7 +39,7 @@ def frame_outliers(means: np.ndarray, *, confidence: float = 0.999, robust: bool
     means : ndarray, (N,)
         Mean intensity of each frame (normalised raw).
     confidence : float
-        Seed: 0.999, i.e. |mu_i - mu_a| > 3.29 sigma_a drops frame i.
+        Abdelhamed 2020 (section 5.3.2): 0.999, i.e. |mu_i - mu_a| > 3.29 sigma_a drops frame i.
     robust : bool
         Estimate the centre and spread by median and 1.4826 MAD instead of the
         dissertation's mean and standard deviation. With the plain estimates one outlier
@@ -47,6 +47,18 @@ def frame_outliers(means: np.ndarray, *, confidence: float = 0.999, robust: bool
         (N-1)/sqrt(N)), so the robust form is the default.
 
     ``mu_a`` is recomputed over the kept frames (Abdelhamed 2020: "re-calculate mu_a").
+
+    Returns
+    -------
+    IntensityOutliers
+        ``keep`` (bool per frame), the common mean ``mu_a``, spread ``sigma_a``, ``z`` and the limit.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> out = frame_outliers(np.array([0.5, 0.5, 0.51, 0.49, 0.8, 0.5]))
+    >>> out.keep.tolist(), out.mu_a
+    ([True, True, True, True, False, True], 0.5)
     """
     m = np.asarray(means, dtype=np.float64)
     if m.ndim != 1 or m.size < 1 or not np.all(np.isfinite(m)):
@@ -66,7 +78,31 @@ def frame_outliers(means: np.ndarray, *, confidence: float = 0.999, robust: bool
 
 
 def align_intensity(frame: np.ndarray, mu_i: float, mu_a: float, mode: str = "additive") -> np.ndarray:
-    """Shift a frame to the common mean: additive ``x - mu_i + mu_a`` (eq. 5.4) or multiplicative ``x mu_a / mu_i``."""
+    """Shift a frame to the common mean: additive ``x - mu_i + mu_a`` (eq. 5.4) or multiplicative ``x mu_a / mu_i``.
+
+    Parameters
+    ----------
+    frame : ndarray
+        One frame (normalised raw).
+    mu_i, mu_a : float
+        Its mean and the common mean of the kept frames.
+    mode : {"additive", "multiplicative", "none"}
+        How the frame is brought to ``mu_a``.
+
+    Returns
+    -------
+    ndarray
+        float32 frame with mean ``mu_a``.
+
+    See Also
+    --------
+    frame_outliers : the common mean ``mu_a`` and the frames kept.
+
+    Examples
+    --------
+    >>> align_intensity(np.full((2, 2), 0.4, np.float32), 0.4, 0.5, "multiplicative").tolist()
+    [[0.5, 0.5], [0.5, 0.5]]
+    """
     if mode == "additive":
         return (frame + np.float32(mu_a - mu_i)).astype(np.float32, copy=False)
     if mode == "multiplicative":

@@ -59,6 +59,18 @@ class RobustMean:
     valid : ndarray, bool, (P,)
         False where the pixel had fewer than ``min_samples`` uncensored samples
         and the documented fallback was used (see :func:`robust_mean`).
+
+    Parameters
+    ----------
+    mu, sigma, n_used, n_low, n_high, valid
+        As the attributes.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> r = plain_mean(np.array([[0.2, 0.4], [0.4, 0.4], [0.6, 0.4]]))
+    >>> [round(float(v), 3) for v in r.mu], r.valid.tolist()
+    ([0.4, 0.4], [True, True])
     """
 
     mu: np.ndarray
@@ -162,6 +174,15 @@ def wls_cdf_fit(samples: np.ndarray, *, lo: float = 0.0, hi: float = 1.0, refine
     Returns
     -------
     RobustMean
+        Per-pixel ``mu``, ``sigma``, sample counts and ``valid``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> x = np.random.default_rng(0).normal(0.5, 0.05, (200, 3))
+    >>> fit = wls_cdf_fit(x)
+    >>> bool(np.all(np.abs(fit.mu - 0.5) < 0.02)), bool(np.all(np.abs(fit.sigma - 0.05) < 0.01))
+    (True, True)
     """
     x = _check_samples(samples, axis)
     P, N = x.shape
@@ -219,6 +240,27 @@ def wls_objective(mu: float, sigma: float, x: np.ndarray, lo: float = 0.0, hi: f
 
     The reference definition used by the tests and the Nelder-Mead baseline
     (same plotting positions and censoring ranks as :func:`wls_cdf_fit`).
+
+    Parameters
+    ----------
+    mu, sigma : float
+        The normal law to evaluate.
+    x : ndarray
+        One pixel's samples (NaN skipped; at or beyond ``lo`` / ``hi``: censored).
+    lo, hi : float
+        The clip points.
+
+    Returns
+    -------
+    float
+        The weighted squared CDF misfit.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> x = np.array([0.4, 0.5, 0.6])
+    >>> wls_objective(0.5, 0.1, x) < wls_objective(0.7, 0.1, x)
+    True
     """
     x = np.asarray(x, dtype=np.float64)
     x = x[~np.isnan(x)]
@@ -315,10 +357,30 @@ def censored_mle(samples: np.ndarray, *, lo: float = 0.0, hi: float = 1.0, max_i
     log L = sum_uncensored [log phi((x - mu)/sigma) - log sigma]
             + n_low log Phi((lo - mu)/sigma) + n_high log Phi((mu - hi)/sigma).
 
-    Parameters and returns as :func:`wls_cdf_fit`. Newton steps on
+    Newton steps on
     (mu, log sigma) with analytic gradient and Hessian, step halving where the
     likelihood would not increase, gradient ascent where the Hessian is not
     negative definite. Reference: Tobin (1958), doi:10.2307/1907382.
+
+    Parameters
+    ----------
+    samples, lo, hi, min_samples, axis
+        As :func:`wls_cdf_fit`.
+    max_iter, tol : int, float
+        Newton iterations at most, and the step size that stops them.
+
+    Returns
+    -------
+    RobustMean
+        As :func:`wls_cdf_fit`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> x = np.clip(np.random.default_rng(1).normal(0.95, 0.05, (400, 2)), 0.0, 1.0)  # clipped at white
+    >>> fit = censored_mle(x)
+    >>> bool(np.all(np.abs(fit.mu - 0.95) < 0.01)), bool(np.all(fit.n_high > 0))
+    (True, True)
     """
     x = _check_samples(samples, axis)
     fin = ~np.isnan(x)
@@ -419,6 +481,27 @@ def plain_mean(samples: np.ndarray, *, lo: float = 0.0, hi: float = 1.0, min_sam
 
     Clipped samples are averaged as they are (the biased baseline of Abdelhamed 2020, fig. 5.9);
     NaN samples are skipped. ``valid`` is False only where no sample is finite.
+
+    Parameters
+    ----------
+    samples, lo, hi, axis
+        As :func:`wls_cdf_fit` (``lo`` and ``hi`` only count the clipped samples).
+    min_samples : int
+        Fewest finite samples for ``valid``.
+
+    Returns
+    -------
+    RobustMean
+        The plain mean and standard deviation per pixel.
+
+    See Also
+    --------
+    robust_mean : the estimate that accounts for the clipped samples.
+
+    Examples
+    --------
+    >>> plain_mean(np.array([[1.0], [0.5], [np.nan]])).mu.tolist()  # the clipped 1.0 counts as it is
+    [0.75]
     """
     x = _check_samples(samples, axis)
     fin = ~np.isnan(x)
@@ -446,6 +529,29 @@ def robust_mean(samples: np.ndarray, method: str = "wls", *, lo: float = 0.0, hi
     Fallback (``wls``/``mle``) where fewer than ``min_samples`` (default 3)
     samples are uncensored: all high-censored -> ``hi``, all low-censored ->
     ``lo``, otherwise the plain mean clipped to [lo, hi]; ``valid`` is False there.
+
+    Parameters
+    ----------
+    samples, lo, hi
+        As :func:`wls_cdf_fit`.
+    method : {"wls", "mle", "mean"}
+        :func:`wls_cdf_fit`, :func:`censored_mle` or :func:`plain_mean`.
+    uncensored_mean : bool
+        Plain mean where no sample is censored or missing (above).
+    **kw
+        Passed on to the method.
+
+    Returns
+    -------
+    RobustMean
+        The chosen estimate.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> x = np.array([[0.3, 1.0], [0.5, 1.0], [0.4, 0.9]])
+    >>> [round(float(v), 3) for v in robust_mean(x, "mean").mu]
+    [0.4, 0.967]
     """
     if method in ("wls", "mle"):
         fn = wls_cdf_fit if method == "wls" else censored_mle

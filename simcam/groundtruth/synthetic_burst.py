@@ -57,6 +57,18 @@ class SyntheticBurst:
     clip : bool
         Clip to [clip_low, 1] (False gives the unclipped oracle burst, same noise draws).
     seed : int
+        Seed of the scene, the drift and the noise draws.
+
+    Attributes
+    ----------
+    fields
+        As the parameters; :meth:`frame`, :meth:`truth` and :meth:`dark` draw frame ``i``.
+
+    Examples
+    --------
+    >>> sb = SyntheticBurst(shape=(16, 16), n=4, drift_px=0.0, seed=2)
+    >>> sb.frame(0).shape, bool((sb.truth(0) >= 0).all())
+    ((16, 16), True)
     """
 
     shape: tuple[int, int] = (256, 256)

@@ -35,6 +35,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..errors import DngError
+from ..frame import COLOUR_MATRIX_TAGS
 
 #: Camera-profile tag codes (DNG Specification 1.7.0.0, chapter 4).
 PROFILE_TAGS: dict[str, int] = {
@@ -316,10 +317,8 @@ def _profile(src: _TagSource, *, require_color_matrix: bool) -> CameraProfile:
         calibration_signature=src.text("ProfileCalibrationSignature"),
         camera_calibration_signature=src.text("CameraCalibrationSignature"),
         embed_policy=src.integer("ProfileEmbedPolicy"),
-        color_matrix1=src.matrix("ColorMatrix1"),
-        color_matrix2=src.matrix("ColorMatrix2"),
-        forward_matrix1=src.matrix("ForwardMatrix1"),
-        forward_matrix2=src.matrix("ForwardMatrix2"),
+        **{name: src.matrix(tag) for name, tag in COLOUR_MATRIX_TAGS.items()
+           if not name.startswith("camera_calibration")},  # a camera profile holds no CameraCalibration
         calibration_illuminant1=_illuminant(src, "CalibrationIlluminant1"),
         calibration_illuminant2=_illuminant(src, "CalibrationIlluminant2"),
         hue_sat_map1=hsm1,

@@ -33,7 +33,7 @@ import numpy as np
 
 from ..cfa import BAYER_PATTERNS, shift_pattern
 from ..errors import DngError
-from ..frame import CameraMeta, RawFrame
+from ..frame import COLOUR_MATRIX_TAGS, CameraMeta, RawFrame
 from .dcp import embedded_profile_extra
 from .dng_tags import T, check_raw_entries
 from .opcodes import check_opcode_work, parse_opcode_list
@@ -650,19 +650,10 @@ def _meta_from_tiff(tif, path: Path, log: _LogCapture | None = None) -> tuple[Ca
         model=tags.text("Model"),
         unique_camera_model=tags.text("UniqueCameraModel"),
         cfa=cfa,
-        black_level=black,
-        black_level_delta_h=dh,
-        black_level_delta_v=dv,
-        white_level=white,
-        linearization_table=lin,
+        black_level=black, black_level_delta_h=dh, black_level_delta_v=dv, white_level=white, linearization_table=lin,
         as_shot_neutral=vec3("AsShotNeutral"),
         as_shot_white_xy=vec3("AsShotWhiteXY", 2),
-        color_matrix1=tags.matrix("ColorMatrix1"),
-        color_matrix2=tags.matrix("ColorMatrix2"),
-        camera_calibration1=tags.matrix("CameraCalibration1"),
-        camera_calibration2=tags.matrix("CameraCalibration2"),
-        forward_matrix1=tags.matrix("ForwardMatrix1"),
-        forward_matrix2=tags.matrix("ForwardMatrix2"),
+        **{name: tags.matrix(tag) for name, tag in COLOUR_MATRIX_TAGS.items()},
         analog_balance=vec3("AnalogBalance"),
         calibration_illuminant1=illuminant("CalibrationIlluminant1"),
         calibration_illuminant2=illuminant("CalibrationIlluminant2"),
@@ -670,13 +661,8 @@ def _meta_from_tiff(tif, path: Path, log: _LogCapture | None = None) -> tuple[Ca
         noise_profile=noise,
         iso=iso,
         exposure_time_s=exposure,
-        orientation=orientation,
-        active_area=active_area,
-        default_crop_origin=crop_origin,
-        default_crop_size=crop_size,
-        opcode_list1=opcode_lists[1],
-        opcode_list2=opcode_lists[2],
-        opcode_list3=opcode_lists[3],
+        orientation=orientation, active_area=active_area, default_crop_origin=crop_origin, default_crop_size=crop_size,
+        opcode_list1=opcode_lists[1], opcode_list2=opcode_lists[2], opcode_list3=opcode_lists[3],
         origin=(0, 0),
         source=str(path),
         extra=extra,
@@ -737,10 +723,7 @@ def read_dng_meta(path: str | os.PathLike) -> CameraMeta:
 def read_dng(path: str | os.PathLike) -> RawFrame:
     """Read a DNG: the full stored CFA image in DN plus its metadata.
 
-    Parameters
-    ----------
-    path : path-like
-        A DNG file with a CFA (Bayer) main image.
+    ``path`` is a DNG file with a CFA (Bayer) main image, as for :func:`read_dng_meta`.
 
     Returns
     -------

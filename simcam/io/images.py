@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -268,6 +269,29 @@ def write_thumbnail(path: str | Path, samples: np.ndarray, *, kind: str | None =
                        protect=protect, quality=85)
 
 
+def decode_image(path: str | Path, fmt: Any = None, *, channels: int | None = None,
+                 error: type[Exception] = ImageIOError, undecodable: str = "cannot decode image"):
+    """Open an image with OpenImageIO and decode its pixels: ``(pixels, spec)``.
+
+    ``fmt``: the pixel type to decode to (None: the stored one); ``channels``: only the first ones (None:
+    all); ``error`` (one line naming the file) when it cannot be opened, or (``undecodable``) decoded.
+    """
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise error(f"{path}: cannot read image ({oiio.geterror()})")
+    try:
+        spec = inp.spec()
+        fmt = spec.format if fmt is None else fmt
+        data = inp.read_image(fmt) if channels is None else inp.read_image(0, 0, 0, channels, fmt)
+    finally:
+        inp.close()
+    if data is None:
+        raise error(f"{path}: {undecodable}")
+    return data, spec
+
+
 def read_image(path: str | Path) -> np.ndarray:
     """Read an image as float32 (integer types scaled to [0, 1]); H x W x C."""
     import OpenImageIO as oiio
@@ -275,13 +299,5 @@ def read_image(path: str | Path) -> np.ndarray:
     path = Path(path)
     if not path.exists():
         raise ImageIOError(f"{path}: no such file")
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        raise ImageIOError(f"{path}: cannot read image ({oiio.geterror()})")
-    try:
-        data = inp.read_image(oiio.FLOAT)
-    finally:
-        inp.close()
-    if data is None:
-        raise ImageIOError(f"{path}: cannot decode image")
+    data, _ = decode_image(path, oiio.FLOAT)
     return np.asarray(data, dtype=np.float32)

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import DngError
+from ..frame import AreaSpec
 
 OPCODE_NAMES = {1: "WarpRectilinear", 2: "WarpFisheye", 3: "FixVignetteRadial", 4: "FixBadPixelsConstant",
                 5: "FixBadPixelsList", 6: "TrimBounds", 7: "MapTable", 8: "MapPolynomial", 9: "GainMap",
@@ -29,35 +30,6 @@ FLAG_OPTIONAL, FLAG_PREVIEW_SKIP = 1, 2
 _AREA = struct.Struct(">4i4I")
 #: Largest table or list simcam decodes (entries); real files hold a few thousand.
 MAX_ENTRIES = 1 << 24
-
-
-@dataclass(frozen=True)
-class AreaSpec:
-    """Which pixels an opcode touches (DNG 1.7 sec. 7, "area spec")."""
-
-    top: int
-    left: int
-    bottom: int
-    right: int
-    plane: int
-    planes: int
-    row_pitch: int
-    col_pitch: int
-
-    def slices(self, shape: tuple[int, int]) -> tuple[slice, slice]:
-        """Row and column slices of an (H, W) image (an empty rectangle: the whole image)."""
-        h, w = shape
-        if self.bottom <= self.top or self.right <= self.left:
-            t, l, b, r = 0, 0, h, w
-        else:
-            t, l, b, r = max(self.top, 0), max(self.left, 0), min(self.bottom, h), min(self.right, w)
-        # keep the pitch phase of the rectangle's own origin
-        t += (-(t - self.top)) % self.row_pitch if self.bottom > self.top else 0
-        l += (-(l - self.left)) % self.col_pitch if self.right > self.left else 0
-        return slice(t, max(t, b), self.row_pitch), slice(l, max(l, r), self.col_pitch)
-
-    def plane_range(self, n_planes: int) -> range:
-        return range(self.plane, min(self.plane + self.planes, n_planes))
 
 
 @dataclass(frozen=True)

@@ -79,16 +79,15 @@ def check_output_dir(path: str | Path, *, option: str = "--out", inputs: Iterabl
 
     Parameters
     ----------
-    path : path
-        The output folder.
-    option : str
-        The command-line option that named it (in the error).
+    path, option
+        The output folder and the command-line option that named it (in the error).
     inputs : paths
         Files or folders the command reads; the output may not be one of them.
 
     Returns
     -------
     Path
+        ``path`` as a :class:`~pathlib.Path` (the folder is not created here).
 
     Raises
     ------

@@ -225,3 +225,14 @@ def load_defect_mask(path: str | os.PathLike, *, variable: str | None = None) ->
     if a.dtype != bool and not np.all(np.isin(a, (0, 1))):
         raise DatasetError(f"{path}: mask values {np.unique(a)[:5].tolist()}...; expected 0/1")
     return a.astype(bool)
+
+
+def read_sidd_image(path: str | os.PathLike, *, dtype=np.float64, what: str = "RAW") -> np.ndarray:
+    """The image of a SIDD ``.MAT`` file (Abdelhamed, Lin & Brown, CVPR 2018): its variable ``x``, else its
+    only 2-D array (normalised raw in [0, 1] for the RAW files), as ``dtype``; DatasetError naming the
+    file as a SIDD ``what`` .MAT when it holds none."""
+    v = load_mat(Path(path), DatasetError)
+    x = v.get("x", next((a for a in v.values() if isinstance(a, np.ndarray) and a.ndim == 2), None))
+    if x is None or np.ndim(x) != 2:
+        raise DatasetError(f"{path}: no 2-D image variable 'x'; expected a SIDD {what} .MAT")
+    return np.asarray(x, dtype=dtype)

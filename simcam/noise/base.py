@@ -29,6 +29,7 @@ from pydantic import BaseModel, ConfigDict, ValidationError, field_validator
 
 from ..cfa import check_pattern
 from ..errors import NoiseModelError, SimcamError
+from ..registry import Registry
 
 #: rows per independently seeded block (even, so the CFA phase is the same in every block).
 BLOCK_ROWS = 32
@@ -44,7 +45,7 @@ def sub_rows(width: int) -> int:
 
 SiteParam = Union[float, list[float]]
 
-_MODELS: dict[str, type["NoiseModel"]] = {}
+_MODELS = Registry("noise model type")
 
 
 @dataclass(frozen=True)
@@ -64,6 +65,17 @@ class NoiseCondition:
         Where the data came from (for error messages).
     exposure_s : float or None
         Exposure time in seconds (exposure-dependent effects: ``dark_current``, ``amp_glow``).
+
+    Parameters
+    ----------
+    iso, camera, cfa, source, exposure_s
+        As the attributes; ``cfa`` is checked (a bad pattern is a :class:`~simcam.errors.CfaError`).
+
+    Examples
+    --------
+    >>> cond = NoiseCondition(iso=800.0, camera="GP", cfa="GRBG")
+    >>> cond.iso, cond.cfa, cond.exposure_s is None
+    (800.0, 'GRBG', True)
     """
 
     iso: float | None = None
@@ -77,20 +89,48 @@ class NoiseCondition:
             object.__setattr__(self, "cfa", check_pattern(self.cfa, where=f"{self.source or 'cond'}: cfa"))
 
 
-class NoiseModel(BaseModel):
-    """Base of parametric noise models (see module docstring)."""
+class ProfileEntryModel(BaseModel):
+    """A pydantic model that is one entry of a noise profile, ``{type: NAME, **params}``: the base of the
+    noise models (:class:`NoiseModel`) and of their effects (:class:`simcam.noise.effects.Effect`)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     type: str
-    #: False for models whose log_prob raises (documented per model).
-    tractable: ClassVar[bool] = True
 
-    # -- serialisation ----------------------------------------------------
     def to_entry(self) -> dict[str, Any]:
         """The profile entry (JSON-compatible dict, ``type`` first)."""
         return self.model_dump(mode="json")
 
+
+class NoiseModel(ProfileEntryModel):
+    """Base of parametric noise models (see module docstring).
+
+    Parameters
+    ----------
+    type : str
+        The model's registered name (its subclasses fix it as a ``Literal`` default).
+    **params
+        The model's own fields (pydantic, ``extra="forbid"``, frozen).
+
+    Attributes
+    ----------
+    tractable : bool
+        False for models whose :meth:`log_prob` raises.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import simcam.noise
+    >>> model = model_types()["poisson_gaussian"](beta1=1e-3, beta2=1e-5)
+    >>> noisy = model.sample(np.full((32, 32), 0.5, np.float32), NoiseCondition(), np.random.default_rng(0))
+    >>> noisy.shape, model.to_entry()["type"]
+    ((32, 32), 'poisson_gaussian')
+    """
+
+    #: False for models whose log_prob raises (documented per model).
+    tractable: ClassVar[bool] = True
+
+    # -- serialisation ----------------------------------------------------
     @classmethod
     def from_entry(cls, entry: dict[str, Any], *, where: str = "model") -> "NoiseModel":
         return model_from_entry(entry, where=where)
@@ -229,19 +269,53 @@ class PoissonScaleModel(NoiseModel):
 # -- registry -------------------------------------------------------------
 
 def register_model(cls: type[NoiseModel]) -> type[NoiseModel]:
-    """Class decorator: register a model under its ``type`` literal default."""
+    """Class decorator: register a model under its ``type`` literal default.
+
+    Parameters
+    ----------
+    cls : type
+        A :class:`NoiseModel` subclass whose field ``type`` has a string default.
+
+    Returns
+    -------
+    type
+        ``cls`` itself, now found by :func:`model_from_entry` and :func:`model_types`.
+
+    Raises
+    ------
+    TypeError
+        No string default, or another class already holds the name.
+
+    Examples
+    --------
+    >>> from typing import Literal
+    >>> class Silent(NoiseModel):
+    ...     type: Literal["silent_doc_example"] = "silent_doc_example"
+    >>> register_model(Silent) is Silent, "silent_doc_example" in model_types()
+    (True, True)
+    >>> _ = _MODELS.pop("silent_doc_example")
+    """
     key = cls.model_fields["type"].default
     if not isinstance(key, str):
         raise TypeError(f"{cls.__name__}: field 'type' needs a string default")
-    if key in _MODELS and _MODELS[key] is not cls:
-        raise TypeError(f"noise model type {key!r} registered twice")
-    _MODELS[key] = cls
-    return cls
+    return _MODELS.add(key, cls)
 
 
 def model_types() -> dict[str, type[NoiseModel]]:
-    """All registered model classes by ``type`` name (:mod:`simcam.noise` registers the built-in ones)."""
-    return dict(_MODELS)
+    """All registered model classes by ``type`` name (:mod:`simcam.noise` registers the built-in ones).
+
+    Returns
+    -------
+    dict
+        ``{type name: NoiseModel subclass}``; a copy, so changing it leaves the registry as it is.
+
+    Examples
+    --------
+    >>> import simcam.noise
+    >>> model_types()["nlf"].__name__, "poisson_gaussian" in model_types()
+    ('NLF', True)
+    """
+    return _MODELS.types()
 
 
 def from_registry(entry: Any, registry: dict[str, type], *, base: type, noun: str, expected: list[str],

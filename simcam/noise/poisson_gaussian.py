@@ -69,14 +69,21 @@ def _window(x, lam, scale, var):
     return lo, 2 * half + 1
 
 
-def _pg_logpdf_chunk(x, lam, scale, var):
-    lo, width = _window(x, lam, scale, var)
+def _poisson_terms(lam, lo, width):
+    """The counts ``k = lo, lo + 1, ...`` of each element's Poisson window (rows padded to the widest),
+    which of them are inside the ``width`` of the window, and ``log Pois(k; lam)``."""
     kmax = int(width.max())
     k = lo[:, None] + np.arange(kmax)[None, :]
     valid = np.arange(kmax)[None, :] < width[:, None]
     with np.errstate(divide="ignore", invalid="ignore"):
         logpois = np.where(lam[:, None] > 0, k * np.log(lam[:, None]) - lam[:, None] - gammaln(k + 1.0),
                            np.where(k == 0, 0.0, -np.inf))
+    return k, valid, logpois
+
+
+def _pg_logpdf_chunk(x, lam, scale, var):
+    lo, width = _window(x, lam, scale, var)
+    k, valid, logpois = _poisson_terms(lam, lo, width)
     r = x[:, None] - scale[:, None] * k
     lognorm = -0.5 * r * r / var[:, None] - 0.5 * np.log(var[:, None]) - _LOG_SQRT_2PI
     terms = np.where(valid, logpois + lognorm, -np.inf)
@@ -96,12 +103,7 @@ def pg_logcdf(x: np.ndarray, lam: np.ndarray, scale: np.ndarray, var: np.ndarray
         half = np.ceil(12.0 * np.sqrt(ls) + 12.0)
         lo = np.maximum(0.0, np.floor(ls - half))
         width = (ls + half) - lo + 1
-        kmax = int(width.max())
-        k = lo[:, None] + np.arange(kmax)[None, :]
-        valid = np.arange(kmax)[None, :] < width[:, None]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            logpois = np.where(ls[:, None] > 0, k * np.log(ls[:, None]) - ls[:, None] - gammaln(k + 1.0),
-                               np.where(k == 0, 0.0, -np.inf))
+        k, valid, logpois = _poisson_terms(ls, lo, width)
         r = (xs[:, None] - ss[:, None] * k) / np.sqrt(vs[:, None])
         logc = log_ndtr(-r if upper else r)
         out[sl] = logsumexp(np.where(valid, logpois + logc, -np.inf), axis=1)

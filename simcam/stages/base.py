@@ -1,10 +1,12 @@
 """Stage contract and registry.
 
 A stage is a small class with a pydantic ``Params`` model (``extra="forbid"``,
-strict types) that *is* its YAML node, class attributes naming the signal kinds
-it accepts and produces, and a deterministic ``apply``. Stages that draw random
-numbers set ``random = True`` and implement ``sample(rng, frame) -> dict``; the
-pipeline passes what was drawn to ``apply(frame, drawn)``.
+strict types) that *is* its YAML node, class keywords naming its ``type`` and the
+signal kinds it accepts and produces (``class Gamma(Stage, type="gamma", accepts=...,
+produces=...)``), checks of its parameters beyond their types (``check_params``) and
+a deterministic ``apply``. Stages that draw random numbers declare ``random=True`` and
+implement ``sample(rng, frame) -> dict``; the pipeline passes what was drawn to
+``apply(frame, drawn)``.
 """
 
 from __future__ import annotations
@@ -16,18 +18,63 @@ from pydantic import BaseModel, ConfigDict
 
 from ..errors import PipelineError, StageError
 from ..frame import RawFrame
+from ..registry import Registry
 
-_REGISTRY: dict[str, type["Stage"]] = {}
+_REGISTRY = Registry("stage type", name_both=True)
 
 
 class StageParams(BaseModel):
-    """Base of every stage's parameters: unknown keys and loose types are errors."""
+    """Base of every stage's parameters: unknown keys and loose types are errors.
+
+    Attributes
+    ----------
+    fields
+        Each stage's ``Params`` subclass declares its YAML keys as pydantic fields (strict, frozen).
+
+    Examples
+    --------
+    >>> class Params(StageParams):
+    ...     strength: float = 1.0
+    >>> Params(strength=0.5).strength
+    0.5
+    >>> Params(strenght=0.5)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    pydantic_core._pydantic_core.ValidationError: ...
+    """
 
     model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
 
 
 class Stage:
-    """Base class of pipeline stages (see module docstring)."""
+    """Base class of pipeline stages (see module docstring).
+
+    Parameters
+    ----------
+    params : StageParams, optional
+        The stage's validated ``Params``; or give them as keywords instead.
+    **kwargs
+        The ``Params`` fields (validated strictly; unknown keys are errors).
+
+    Attributes
+    ----------
+    type : str
+        The stable key of the stage in pipeline YAML.
+    accepts, produces : frozenset of str, str or None
+        Signal kinds it takes and gives (None: the input's).
+    params : StageParams
+        Its parameters.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from simcam.frame import CameraMeta, RawFrame
+    >>> gamma = get_stage_class("gamma")(curve="power", exponent=0.5)
+    >>> frame = RawFrame(np.full((2, 2, 3), 0.25), CameraMeta(), kind="linear_srgb")
+    >>> out = gamma(frame)
+    >>> out.kind, float(out.data[0, 0, 0]), gamma.to_node()
+    ('display', 0.5, {'type': 'gamma', 'curve': 'power', 'exponent': 0.5})
+    """
 
     type: ClassVar[str]
     accepts: ClassVar[frozenset[str]]
@@ -35,12 +82,25 @@ class Stage:
     random: ClassVar[bool] = False
     Params: ClassVar[type[StageParams]] = StageParams
 
+    def __init_subclass__(cls, **attrs: Any):
+        """A stage declares ``type``, ``accepts``, ``produces`` and ``random`` as keywords of its class
+        statement (``class Gamma(Stage, type="gamma", accepts=frozenset({"linear_srgb"}), produces="display")``)."""
+        super().__init_subclass__()
+        for key, value in attrs.items():
+            if key not in ("type", "accepts", "produces", "random"):
+                raise TypeError(f"stage {cls.__name__}: unknown class keyword {key!r}")
+            setattr(cls, key, value)
+
     def __init__(self, params: StageParams | None = None, **kwargs: Any):
         if params is None:
             params = self.Params.model_validate_json(_to_json(kwargs))
         elif kwargs:
             raise TypeError("pass either a Params object or keyword parameters, not both")
         self.params = params
+        self.check_params(params)
+
+    def check_params(self, p: StageParams) -> None:
+        """Checks of the parameters beyond their types (a stage's ranges and combinations): StageError."""
 
     # -- contract ----------------------------------------------------------
     def output_kind(self, kind: str) -> str:
@@ -78,22 +138,79 @@ class Stage:
 
 
 def register_stage(cls: type[Stage]) -> type[Stage]:
-    """Class decorator: register a stage under its stable ``type`` key."""
+    """Class decorator: register a stage under its stable ``type`` key.
+
+    Parameters
+    ----------
+    cls : type
+        A :class:`Stage` subclass with a string class attribute ``type``.
+
+    Returns
+    -------
+    type
+        ``cls`` itself, now found by :func:`get_stage_class` and :func:`stage_types`.
+
+    Examples
+    --------
+    >>> class Halve(Stage, type="halve_doc_example", accepts=frozenset({"raw"})):
+    ...     pass
+    >>> register_stage(Halve) is get_stage_class("halve_doc_example")
+    True
+    >>> _ = _REGISTRY.pop("halve_doc_example")
+    """
     key = getattr(cls, "type", None)
     if not key or not isinstance(key, str):
         raise TypeError(f"{cls.__name__} needs a string class attribute 'type'")
-    if key in _REGISTRY and _REGISTRY[key] is not cls:
-        raise TypeError(f"stage type {key!r} registered twice ({_REGISTRY[key].__name__}, {cls.__name__})")
-    _REGISTRY[key] = cls
-    return cls
+    return _REGISTRY.add(key, cls)
 
 
 def stage_types() -> dict[str, type[Stage]]:
-    """All registered stage classes by ``type`` key."""
-    return dict(_REGISTRY)
+    """All registered stage classes by ``type`` key (importing :mod:`simcam.pipeline` registers the built-in ones).
+
+    Returns
+    -------
+    dict of str to type
+        A copy of the stage registry.
+
+    See Also
+    --------
+    get_stage_class : one class, with an error that lists the keys.
+
+    Examples
+    --------
+    >>> import simcam.pipeline
+    >>> {"demosaic", "gamma"} <= set(stage_types())
+    True
+    """
+    return _REGISTRY.types()
 
 
 def get_stage_class(key: str, *, where: str = "type") -> type[Stage]:
+    """The stage class registered under ``key``.
+
+    Parameters
+    ----------
+    key : str
+        A stage ``type`` (``"gamma"``, ``"demosaic"``...).
+    where : str
+        Location named in the error message.
+
+    Returns
+    -------
+    type
+        The :class:`Stage` subclass.
+
+    Raises
+    ------
+    PipelineError
+        No stage has that key (the message lists the known ones).
+
+    Examples
+    --------
+    >>> import simcam.pipeline
+    >>> get_stage_class("gamma").__name__
+    'Gamma'
+    """
     try:
         return _REGISTRY[key]
     except KeyError:

@@ -32,17 +32,13 @@ from .white_balance import capture_neutral
 
 
 @register_stage
-class CameraToXYZ(Stage):
+class CameraToXYZ(Stage, type="camera_to_xyz", accepts=frozenset({"camera_rgb"}), produces="xyz"):
     """Camera RGB -> XYZ D50 with the DNG colour matrices of the capture's white.
 
     ``white``: ``auto`` (the white the data were balanced to, i.e. 1 / meta.white_balance_gains,
     else the as-shot white), ``as_shot`` (AsShotNeutral / AsShotWhiteXY), ``neutral``
     (explicit camera neutral), ``xy`` (explicit CIE 1931 xy).
     """
-
-    type = "camera_to_xyz"
-    accepts = frozenset({"camera_rgb"})
-    produces = "xyz"
 
     class Params(StageParams):
         white: Literal["auto", "as_shot", "neutral", "xy"] = "auto"
@@ -57,9 +53,7 @@ class CameraToXYZ(Stage):
         #: dng: DNG-specification colour; sidd: simple-camera-pipeline compatibility
         mode: Literal["dng", "sidd"] = "dng"
 
-    def __init__(self, params=None, **kw):
-        super().__init__(params, **kw)
-        p = self.params
+    def check_params(self, p) -> None:
         if (p.white == "neutral") != (p.neutral is not None):
             raise StageError("camera_to_xyz: neutral: expected [r, g, b] exactly when white is 'neutral'")
         if (p.white == "xy") != (p.xy is not None):

@@ -14,19 +14,15 @@ _NOT_DN = frozenset(k for k in SIGNAL_KINDS if k != "raw_dn")
 
 
 @register_stage
-class Clip(Stage):
+class Clip(Stage, type="clip", accepts=_NOT_DN):
     """Clamp values to ``[low, high]`` (either bound may be ``null`` for none). float32."""
-
-    type = "clip"
-    accepts = _NOT_DN
 
     class Params(StageParams):
         low: Optional[float] = 0.0
         high: Optional[float] = 1.0
 
-    def __init__(self, params=None, **kw):
-        super().__init__(params, **kw)
-        lo, hi = self.params.low, self.params.high
+    def check_params(self, p) -> None:
+        lo, hi = p.low, p.high
         for name, v in (("low", lo), ("high", hi)):
             if v is not None and not np.isfinite(v):
                 raise StageError(f"clip: {name}: expected a finite number or null, got {v}")
@@ -42,22 +38,18 @@ class Clip(Stage):
 
 
 @register_stage
-class Quantize(Stage):
+class Quantize(Stage, type="quantize", accepts=_NOT_DN):
     """Round to ``2^bits - 1`` steps on [0, 1] (values are clipped to [0, 1] first); stays float32.
 
     ``out = round(clip(x, 0, 1) * (2^bits - 1)) / (2^bits - 1)`` (round half to even).
     """
 
-    type = "quantize"
-    accepts = _NOT_DN
-
     class Params(StageParams):
         bits: int = 8
 
-    def __init__(self, params=None, **kw):
-        super().__init__(params, **kw)
-        if not 1 <= self.params.bits <= 16:
-            raise StageError(f"quantize: bits: expected an integer in 1..16, got {self.params.bits}")
+    def check_params(self, p) -> None:
+        if not 1 <= p.bits <= 16:
+            raise StageError(f"quantize: bits: expected an integer in 1..16, got {p.bits}")
 
     def apply(self, frame: RawFrame, drawn=None) -> RawFrame:
         levels = np.float32(2 ** self.params.bits - 1)

@@ -102,12 +102,8 @@ class DcpRender:
 
 
 @register_stage
-class Dcp(Stage):
+class Dcp(Stage, type="dcp", accepts=frozenset({"camera_rgb"}), produces="xyz"):
     """Camera RGB -> XYZ (D50) through a DNG camera profile (matrices, HueSatMap, exposure, LookTable, tone curve)."""
-
-    type = "dcp"
-    accepts = frozenset({"camera_rgb"})
-    produces = "xyz"
 
     class Params(StageParams):
         #: auto: a .dcp file when ``path`` is set, else the DNG's embedded profile
@@ -127,9 +123,7 @@ class Dcp(Stage):
         #: use ForwardMatrix1/2 when the profile has them
         use_forward_matrix: bool = True
 
-    def __init__(self, params=None, **kw):
-        super().__init__(params, **kw)
-        p = self.params
+    def check_params(self, p) -> None:
         if p.source == "file" and not p.path:
             raise StageError("dcp: path: expected the .dcp file to read when source is 'file'")
         if p.source == "embedded" and p.path:

@@ -16,17 +16,13 @@ from .base import Stage, StageParams, register_stage
 
 
 @register_stage
-class Demosaic(Stage):
+class Demosaic(Stage, type="demosaic", accepts=frozenset({"raw"}), produces="camera_rgb"):
     """Bayer demosaicing: ``raw`` (H x W) -> ``camera_rgb`` (H x W x 3 float32), not clipped.
 
     ``method``: ``bilinear``, ``malvar2004`` (default; Malvar, He & Cutler 2004,
     doi:10.1109/ICASSP.2004.1326587) or ``menon2007`` (Menon et al. 2007,
     doi:10.1109/TIP.2006.884928, via colour-demosaicing; slow).
     """
-
-    type = "demosaic"
-    accepts = frozenset({"raw"})
-    produces = "camera_rgb"
 
     class Params(StageParams):
         method: Literal["bilinear", "malvar2004", "menon2007"] = "malvar2004"

@@ -11,22 +11,17 @@ from .base import Stage, StageParams, register_stage
 
 
 @register_stage
-class Gamma(Stage):
+class Gamma(Stage, type="gamma", accepts=frozenset({"linear_srgb"}), produces="display"):
     """``curve: srgb`` (IEC 61966-2-1 piecewise OETF) or ``power`` (``sign(x)|x|^exponent``)."""
-
-    type = "gamma"
-    accepts = frozenset({"linear_srgb"})
-    produces = "display"
 
     class Params(StageParams):
         curve: Literal["srgb", "power"] = "srgb"
         #: exponent of the power curve (default 1/2.2); power only
         exponent: float = 1.0 / 2.2
 
-    def __init__(self, params=None, **kw):
-        super().__init__(params, **kw)
-        if not (0.0 < self.params.exponent < 10.0):
-            raise StageError(f"gamma: exponent: expected a value in (0, 10), got {self.params.exponent}")
+    def check_params(self, p) -> None:
+        if not (0.0 < p.exponent < 10.0):
+            raise StageError(f"gamma: exponent: expected a value in (0, 10), got {p.exponent}")
 
     def apply(self, frame: RawFrame, drawn=None) -> RawFrame:
         if self.params.curve == "srgb":

@@ -55,11 +55,8 @@ def spread(values: np.ndarray, valid: np.ndarray, *, max_sigma: float = 64.0) ->
 
 
 @register_stage
-class Highlights(Stage):
+class Highlights(Stage, type="highlights", accepts=frozenset({"raw"})):
     """Reconstruct clipped highlights (``method: clip | propagate``) on a white-balanced mosaic."""
-
-    type = "highlights"
-    accepts = frozenset({"raw"})
 
     class Params(StageParams):
         method: Literal["clip", "propagate"] = "propagate"

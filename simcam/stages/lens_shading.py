@@ -157,7 +157,7 @@ def gain_field(meta: CameraMeta, shape: tuple[int, int], list_index: int = 2) ->
 
 
 @register_stage
-class LensShading(Stage):
+class LensShading(Stage, type="lens_shading", accepts=frozenset({"raw"})):
     """Apply the OpcodeList2 GainMaps (lens-shading / colour-shading correction) to a mosaic.
 
     ``strength`` blends each gain towards 1: ``g' = 1 + strength * (g - 1)``
@@ -171,9 +171,6 @@ class LensShading(Stage):
     the same gain multiplies all four sites of each cell; the rectangle, pitch
     and map origin/spacing are ignored. A compatibility mode, not the DNG spec.
     """
-
-    type = "lens_shading"
-    accepts = frozenset({"raw"})
 
     class Params(StageParams):
         source: Literal["opcodes"] = "opcodes"

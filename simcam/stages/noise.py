@@ -24,12 +24,8 @@ from .base import Stage, StageParams, register_stage
 
 
 @register_stage
-class Noise(Stage):
+class Noise(Stage, type="noise", accepts=frozenset({"raw"}), random=True):
     """Add raw noise from a profile or an inline model (see module docstring)."""
-
-    type = "noise"
-    accepts = frozenset({"raw"})
-    random = True
 
     class Params(StageParams):
         profile: Optional[str] = None
@@ -108,11 +104,8 @@ class Noise(Stage):
 
 
 @register_stage
-class ClipRaw(Stage):
+class ClipRaw(Stage, type="clip_raw", accepts=frozenset({"raw"})):
     """Clip normalised raw to [low, high] (default [0, 1]): the sensor's censoring (Abdelhamed 2020, eq. 3.9)."""
-
-    type = "clip_raw"
-    accepts = frozenset({"raw"})
 
     class Params(StageParams):
         low: float = 0.0

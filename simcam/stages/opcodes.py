@@ -127,11 +127,8 @@ def warp_rectilinear(rgb: np.ndarray, op: WarpRectilinear, *, order: int = 1) ->
 
 
 @register_stage
-class Opcodes(Stage):
+class Opcodes(Stage, type="opcodes", accepts=frozenset(_KIND.values())):
     """Apply OpcodeList1, 2 or 3 (module docstring)."""
-
-    type = "opcodes"
-    accepts = frozenset(_KIND.values())
 
     class Params(StageParams):
         list: Literal[1, 2, 3] = 3

@@ -64,20 +64,16 @@ def orient(image: np.ndarray, value: int) -> np.ndarray:
 
 
 @register_stage
-class Orientation(Stage):
+class Orientation(Stage, type="orientation", accepts=frozenset(RGB_KINDS)):
     """Make the image upright from ``meta.orientation`` (or an explicit ``value``)."""
-
-    type = "orientation"
-    accepts = frozenset(RGB_KINDS)
 
     class Params(StageParams):
         #: EXIF orientation 1..8; None reads meta.orientation
         value: Optional[int] = None
         convention: Literal["exif", "sidd"] = "exif"
 
-    def __init__(self, params=None, **kw):
-        super().__init__(params, **kw)
-        v = self.params.value
+    def check_params(self, p) -> None:
+        v = p.value
         if v is not None and not 1 <= v <= 8:
             raise StageError(f"orientation: value: expected an EXIF orientation 1..8, got {v}")
 

@@ -21,12 +21,8 @@ from .base import Stage, StageParams, register_stage
 
 
 @register_stage
-class Normalize(Stage):
+class Normalize(Stage, type="normalize", accepts=frozenset({"raw_dn"}), produces="raw"):
     """DN -> normalised raw: linearization, per-site black (with deltas), white. No clipping."""
-
-    type = "normalize"
-    accepts = frozenset({"raw_dn"})
-    produces = "raw"
 
     class Params(StageParams):
         #: override the file's black level (DN); None uses the metadata
@@ -57,7 +53,7 @@ def _finite_pair(values, tag: str, source: str) -> tuple[float, float]:
 
 
 @register_stage
-class Crop(Stage):
+class Crop(Stage, type="crop", accepts=frozenset(SIGNAL_KINDS)):
     """Crop to the active area, the DNG default crop, or an explicit rectangle.
 
     ``rect`` is ``[top, left, bottom, right]`` in pixels of the current frame
@@ -66,17 +62,12 @@ class Crop(Stage):
     update`` accepts it and rewrites ``meta.cfa`` so it describes the data.
     """
 
-    type = "crop"
-    accepts = frozenset(SIGNAL_KINDS)
-
     class Params(StageParams):
         region: Literal["active_area", "default", "explicit"] = "active_area"
         rect: Optional[tuple[int, int, int, int]] = None
         phase: Literal["keep", "update"] = "keep"
 
-    def __init__(self, params=None, **kw):
-        super().__init__(params, **kw)
-        p = self.params
+    def check_params(self, p) -> None:
         if (p.region == "explicit") != (p.rect is not None):
             raise StageError("rect: expected [top, left, bottom, right] exactly when region is 'explicit'")
 

@@ -23,11 +23,8 @@ from .base import Stage, StageParams, register_stage
 
 
 @register_stage
-class Tone(Stage):
+class Tone(Stage, type="tone", accepts=frozenset({"linear_srgb", "display"})):
     """Tone curve: ``none``, ``sidd`` (3x^2 - 2x^3 on [0, 1]) or ``filmic`` (Hable 2010); ``exposure`` in EV for all."""
-
-    type = "tone"
-    accepts = frozenset({"linear_srgb", "display"})
 
     class Params(StageParams):
         curve: Literal["none", "sidd", "filmic"] = "none"
@@ -36,9 +33,7 @@ class Tone(Stage):
         #: filmic only: the scene value (before exposure) mapped to display white
         white: float = 1.0
 
-    def __init__(self, params=None, **kw):
-        super().__init__(params, **kw)
-        p = self.params
+    def check_params(self, p) -> None:
         if not np.isfinite(p.exposure) or abs(p.exposure) > 64:
             raise StageError(f"tone: exposure: expected a finite value in [-64, 64] EV, got {p.exposure}")
         if not (np.isfinite(p.white) and p.white > 0):

@@ -97,16 +97,13 @@ def estimate_neutral(frame: RawFrame, method: str, *, clip_level: float = 0.98, 
 
 
 @register_stage
-class WhiteBalance(Stage):
+class WhiteBalance(Stage, type="white_balance", accepts=frozenset({"raw", "camera_rgb"})):
     """White balance by channel gains (G = 1); records them as ``meta.white_balance_gains``.
 
     ``source``: ``as_shot`` (the file's white), ``neutral`` (explicit camera neutral,
     gains = 1 / neutral), ``gains`` (explicit), ``none`` (no change). An explicit
     ``neutral`` or ``gains`` given with ``source: as_shot`` overrides the as-shot white.
     """
-
-    type = "white_balance"
-    accepts = frozenset({"raw", "camera_rgb"})
 
     class Params(StageParams):
         source: Literal["as_shot", "neutral", "gains", "grey_world", "white_patch", "spot", "none"] = "as_shot"
@@ -121,9 +118,7 @@ class WhiteBalance(Stage):
         #: white_patch: share of the brightest unclipped cells averaged as the white
         white_patch_fraction: float = 0.01
 
-    def __init__(self, params=None, **kw):
-        super().__init__(params, **kw)
-        p = self.params
+    def check_params(self, p) -> None:
         if p.neutral is not None and p.gains is not None:
             raise StageError("white_balance: expected either neutral: [r, g, b] or gains: [r, g, b], not both")
         if p.source == "neutral" and p.neutral is None:

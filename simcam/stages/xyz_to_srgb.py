@@ -10,16 +10,12 @@ from .base import Stage, StageParams, register_stage
 
 
 @register_stage
-class XYZToSRGB(Stage):
+class XYZToSRGB(Stage, type="xyz_to_srgb", accepts=frozenset({"xyz"}), produces="linear_srgb"):
     """Bradford D50 -> D65, then the IEC 61966-2-1 XYZ -> linear sRGB matrix.
 
     ``mode: sidd`` uses simple-camera-pipeline's row-normalised matrix without
     adaptation instead (compatibility only).
     """
-
-    type = "xyz_to_srgb"
-    accepts = frozenset({"xyz"})
-    produces = "linear_srgb"
 
     class Params(StageParams):
         mode: Literal["standard", "sidd"] = "standard"

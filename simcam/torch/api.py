@@ -120,6 +120,14 @@ def add_noise(clean: torch.Tensor, profile_or_model: Any, *, iso: Any = None, ex
     -------
     Tensor
         Noisy normalised raw, same shape, dtype and device as ``clean``.
+
+    Examples
+    --------
+    >>> import torch
+    >>> clean = torch.full((2, 1, 4, 4), 0.25)  # two 4x4 mosaics
+    >>> noisy = add_noise(clean, {"type": "nlf", "beta1": 1e-3, "beta2": 1e-5}, generator=torch.Generator().manual_seed(0))
+    >>> noisy.shape, noisy.dtype
+    (torch.Size([2, 1, 4, 4]), torch.float32)
     """
     layout = layout_of(clean)
     _check_generator(generator, clean.device)
@@ -152,7 +160,36 @@ def add_noise(clean: torch.Tensor, profile_or_model: Any, *, iso: Any = None, ex
 
 
 def flow_noise(flow, clean: torch.Tensor, *, iso, camera=None, generator=None, temperature=None) -> torch.Tensor:
-    """Noise Flow noise for ``clean`` (packed or mosaic): ``flow.sample(T * randn)`` with the latent on the batch's device."""
+    """Noise Flow noise for ``clean`` (packed or mosaic): ``flow.sample(T * randn)`` with the latent on the batch's device.
+
+    Parameters
+    ----------
+    flow : NoiseFlow
+        A Noise Flow (Abdelhamed, Brubaker, Brown, ICCV 2019).
+    clean : Tensor
+        Packed ``[B, 4, h, w]`` or mosaic ``[B, 1, H, W]`` clean normalised raw.
+    iso : float or sequence of B
+        ISO of each sample.
+    camera : str, optional
+        A camera of the flow (default: its only one).
+    generator : torch.Generator, optional
+        Source of the latent draw.
+    temperature : float, optional
+        Latent temperature T (default: the flow's own).
+
+    Returns
+    -------
+    Tensor
+        The noise (not the noisy image), in the layout of ``clean``.
+
+    Examples
+    --------
+    >>> import torch
+    >>> from simcam.noise.flow import FlowConfig, NoiseFlow
+    >>> flow = NoiseFlow(FlowConfig(cameras=["GP"], iso_knots=[100.0, 1600.0]))
+    >>> flow_noise(flow, torch.full((1, 1, 8, 8), 0.3), iso=400.0).shape
+    torch.Size([1, 1, 8, 8])
+    """
     if iso is None:
         raise NoiseModelError("iso: Noise Flow needs each sample's ISO, got none")
     packed = clean if layout_of(clean) == PACKED else to_packed(clean)
@@ -174,6 +211,25 @@ class AddNoise(nn.Module):
     Holds the profile (or model / Noise Flow) and a memo of the per-ISO models it resolved, so
     a training loop pays the host-side lookup once per distinct ISO. A Noise Flow is registered as
     a submodule (``.to(device)`` moves it). Has no parameters of its own.
+
+    Parameters
+    ----------
+    profile_or_model : NoiseModel, dict, CalibrationProfile, str, Path, list or NoiseFlow
+        As :func:`add_noise` (a path is loaded once here).
+    camera, extrapolate, validate, temperature
+        As :func:`add_noise`, fixed for every call.
+
+    Attributes
+    ----------
+    source
+        The profile, model or flow.
+
+    Examples
+    --------
+    >>> import torch
+    >>> noise = AddNoise({"type": "poisson_gaussian", "beta1": 1e-3, "beta2": 1e-5})
+    >>> noise(torch.full((1, 4, 2, 2), 0.5), generator=torch.Generator().manual_seed(1)).shape
+    torch.Size([1, 4, 2, 2])
     """
 
     def __init__(self, profile_or_model: Any, *, camera: Any = None, extrapolate: bool = False,

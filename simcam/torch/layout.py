@@ -30,7 +30,24 @@ def layout_of(x: torch.Tensor, *, where: str = "clean") -> str:
 
 
 def to_mosaic(x: torch.Tensor) -> torch.Tensor:
-    """Packed ``[B, 4, h, w]`` -> mosaic ``[B, 1, 2h, 2w]`` (= ``pixel_shuffle(x, 2)``; one strided copy)."""
+    """Packed ``[B, 4, h, w]`` -> mosaic ``[B, 1, 2h, 2w]`` (= ``pixel_shuffle(x, 2)``; one strided copy).
+
+    Parameters
+    ----------
+    x : Tensor
+        Packed batch: channels are the CFA sites (0,0), (0,1), (1,0), (1,1).
+
+    Returns
+    -------
+    Tensor
+        The mosaic batch.
+
+    Examples
+    --------
+    >>> import torch
+    >>> to_mosaic(torch.arange(4.0).reshape(1, 4, 1, 1)).flatten().tolist()
+    [0.0, 1.0, 2.0, 3.0]
+    """
     b, _, h, w = x.shape
     out = torch.empty((b, h, 2, w, 2), dtype=x.dtype, device=x.device)
     out.copy_(x.reshape(b, 2, 2, h, w).permute(0, 3, 1, 4, 2))
@@ -38,7 +55,25 @@ def to_mosaic(x: torch.Tensor) -> torch.Tensor:
 
 
 def to_packed(x: torch.Tensor) -> torch.Tensor:
-    """Mosaic ``[B, 1, H, W]`` (H, W even) -> packed ``[B, 4, H/2, W/2]``."""
+    """Mosaic ``[B, 1, H, W]`` (H, W even) -> packed ``[B, 4, H/2, W/2]``.
+
+    Parameters
+    ----------
+    x : Tensor
+        Mosaic batch whose pixel (0, 0) is CFA site (0, 0).
+
+    Returns
+    -------
+    Tensor
+        The packed batch (inverse of :func:`to_mosaic`).
+
+    Examples
+    --------
+    >>> import torch
+    >>> m = torch.arange(16.0).reshape(1, 1, 4, 4)
+    >>> to_packed(m).shape, torch.equal(to_mosaic(to_packed(m)), m)
+    (torch.Size([1, 4, 2, 2]), True)
+    """
     if x.shape[-2] % 2 or x.shape[-1] % 2:
         raise NoiseModelError(f"clean: packing needs an even mosaic height and width, got {x.shape[-2]}x{x.shape[-1]}")
     b, _, hh, ww = x.shape

@@ -48,6 +48,20 @@ def _gauss_var(group, clean, ctx):
     return clean * b1 + b2
 
 
+def _poisson_window(ls, lo, width, device):
+    """The counts ``k = lo, lo + 1, ...`` of each element's Poisson window (rows padded to the widest),
+    which of them are inside the ``width`` of the window, and ``log Pois(k; ls)``."""
+    with torch.no_grad():
+        kmax = int(width.max())
+    j = torch.arange(kmax, device=device, dtype=torch.float64)[None, :]
+    k = lo[:, None] + j
+    valid = j < width[:, None]
+    lcol = ls[:, None]
+    logpois = torch.where(lcol > 0, k * torch.log(lcol.clamp_min(1e-300)) - lcol - torch.lgamma(k + 1.0),
+                          torch.where(k == 0, torch.zeros_like(k), torch.full_like(k, -math.inf)))
+    return k, valid, logpois
+
+
 def pg_logpdf(x, lam, scale, var):
     """``log sum_k Pois(k; lam) N(x; scale k, var)`` elementwise (float64 1-D tensors, same window as numpy)."""
     out = torch.empty_like(x)
@@ -62,13 +76,7 @@ def pg_logpdf(x, lam, scale, var):
             half = torch.ceil(12.0 / torch.sqrt(prec_p + prec_g) + 12.0)
             lo = (kstar - half).floor().clamp_min(0.0)
             width = 2 * half + 1
-            kmax = int(width.max())
-        j = torch.arange(kmax, device=x.device, dtype=torch.float64)[None, :]
-        k = lo[:, None] + j
-        valid = j < width[:, None]
-        lcol = ls[:, None]
-        logpois = torch.where(lcol > 0, k * torch.log(lcol.clamp_min(1e-300)) - lcol - torch.lgamma(k + 1.0),
-                              torch.where(k == 0, torch.zeros_like(k), torch.full_like(k, -math.inf)))
+        k, valid, logpois = _poisson_window(ls, lo, width, x.device)
         r = xs[:, None] - ss[:, None] * k
         lognorm = -0.5 * r * r / vs[:, None] - 0.5 * torch.log(vs[:, None]) - _LOG_SQRT_2PI
         terms = torch.where(valid, logpois + lognorm, torch.full_like(k, -math.inf))
@@ -86,13 +94,7 @@ def pg_logcdf(x, lam, scale, var, *, upper=False):
             half = torch.ceil(12.0 * torch.sqrt(ls) + 12.0)
             lo = (ls - half).floor().clamp_min(0.0)
             width = (ls + half) - lo + 1
-            kmax = int(width.max())
-        j = torch.arange(kmax, device=x.device, dtype=torch.float64)[None, :]
-        k = lo[:, None] + j
-        valid = j < width[:, None]
-        lcol = ls[:, None]
-        logpois = torch.where(lcol > 0, k * torch.log(lcol.clamp_min(1e-300)) - lcol - torch.lgamma(k + 1.0),
-                              torch.where(k == 0, torch.zeros_like(k), torch.full_like(k, -math.inf)))
+        k, valid, logpois = _poisson_window(ls, lo, width, x.device)
         r = (xs[:, None] - ss[:, None] * k) / torch.sqrt(vs[:, None])
         logc = torch.special.log_ndtr(-r if upper else r)
         pieces.append(torch.logsumexp(torch.where(valid, logpois + logc, torch.full_like(k, -math.inf)), dim=1))
@@ -214,6 +216,28 @@ def log_prob(noisy: torch.Tensor, clean: torch.Tensor, profile_or_model: Any, *,
 
     Same layouts and model sources as :func:`simcam.torch.add_noise`; equal to the numpy model's
     ``log_prob`` on the same values (the composite's is given its ``sensor_seed`` fixed pattern).
+
+    Parameters
+    ----------
+    noisy, clean : Tensor
+        The same shape: packed ``[B, 4, h, w]`` or mosaic ``[B, 1, H, W]`` normalised raw.
+    profile_or_model
+        As :func:`simcam.torch.add_noise` (not a Noise Flow).
+    iso, camera, extrapolate
+        As :func:`simcam.torch.add_noise`.
+
+    Returns
+    -------
+    Tensor
+        float64 log-density per pixel, shape of ``clean``.
+
+    Examples
+    --------
+    >>> import torch
+    >>> clean = torch.full((1, 1, 2, 2), 0.25)
+    >>> lp = log_prob(clean + 0.01, clean, {"type": "nlf", "beta1": 1e-3, "beta2": 1e-5})
+    >>> lp.dtype, bool((lp < log_prob(clean, clean, {"type": "nlf", "beta1": 1e-3, "beta2": 1e-5})).all())
+    (torch.float64, True)
     """
     layout = layout_of(clean)
     if noisy.shape != clean.shape:

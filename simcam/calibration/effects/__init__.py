@@ -58,7 +58,23 @@ DIAGNOSTIC_EFFECT: dict[str, str | None] = _diagnostic_effect()
 
 
 def card_for(name: str) -> EffectCard:
-    """The card of effect ``name``; KeyError naming the vocabulary when there is none."""
+    """The card of effect ``name``; KeyError naming the vocabulary when there is none.
+
+    Parameters
+    ----------
+    name : str
+        An effect of the loop's vocabulary (a key of :data:`CARDS`).
+
+    Returns
+    -------
+    EffectCard
+        Its card (the registry's one instance).
+
+    Examples
+    --------
+    >>> card_for("dsnu").fixed_pattern
+    True
+    """
     try:
         return CARDS[name]
     except KeyError:
@@ -66,10 +82,44 @@ def card_for(name: str) -> EffectCard:
 
 
 def effect_for(diagnostic: str) -> str | None:
-    """The effect a significant ``diagnostic`` proposes (None: no effect of the vocabulary explains it)."""
+    """The effect a significant ``diagnostic`` proposes (None: no effect of the vocabulary explains it).
+
+    Parameters
+    ----------
+    diagnostic : str
+        A diagnostic of the loop's residual battery (:mod:`simcam.calibration.diagnostics`).
+
+    Returns
+    -------
+    str or None
+        The name of the effect whose card lists the diagnostic.
+
+    Examples
+    --------
+    >>> effect_for("col_fpn_excess"), effect_for("dark_checker_jitter")
+    ('column_fpn', None)
+    """
     return DIAGNOSTIC_EFFECT[diagnostic]
 
 
 def params_from_dict(name: str, values) -> EffectParams:
-    """Typed parameters of effect ``name`` from a mapping of its fields (loop_model.yaml, report.json)."""
+    """Typed parameters of effect ``name`` from a mapping of its fields (loop_model.yaml, report.json).
+
+    Parameters
+    ----------
+    name : str
+        An effect of the loop's vocabulary.
+    values : mapping
+        Field name -> value (as :meth:`EffectParams.to_dict` gives them).
+
+    Returns
+    -------
+    EffectParams
+        The effect's parameters; ValueError on an unknown or a missing field.
+
+    Examples
+    --------
+    >>> params_from_dict("quantization", {"step_dn": 4.0})
+    Quantization(step_dn=4.0)
+    """
     return card_for(name).params.from_dict(values)

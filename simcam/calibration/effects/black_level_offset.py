@@ -15,35 +15,20 @@ Profile. ``{type: black_level_offset, offset}``: the four offsets on normalised 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from .. import diagnostics as dg
-from .card import EffectCard, EffectParams, ProfileTerm, quantity
+from .card import DeclaredProfileCard, EffectParams, quantity
 
 
-@dataclass(frozen=True)
 class BlackLevelOffset(EffectParams):
-    offset_dn: list = quantity("DN", "offset of the dark level from the declared black, per 2x2 site (00, 01, 10, 11), DN")
+    offset_dn: list = quantity("DN", "offset of the dark level from the declared black, per 2x2 site (00, 01, 10, 11), DN",
+                               profile="offset", per_full_scale=True)
 
 
-class BlackLevelOffsetCard(EffectCard):
-    name = "black_level_offset"
-    params = BlackLevelOffset
-    diagnostics = ("black_offset",)
-
+class BlackLevelOffsetCard(DeclaredProfileCard, name="black_level_offset", params=BlackLevelOffset, diagnostics=("black_offset",),
+                           null_field="offset_dn"):
     def fit(self, d, model, ctx):
         m = d.dark_map()[0]
         return BlackLevelOffset(offset_dn=[float(np.median(m[dy::2, dx::2]) - d.black_dn[dy, dx])
                                            for dy, dx in dg.PLANE_OFFSETS])
-
-    def to_profile(self, p, model):
-        fs = model.full_scale_dn
-        return ProfileTerm(effect={"type": "black_level_offset", "offset": [float(x) / fs for x in p.offset_dn]})
-
-    def from_profile(self, entry, full_scale_dn):
-        return BlackLevelOffset(offset_dn=list(np.broadcast_to(np.asarray(entry["offset"], float) * full_scale_dn, (4,))))
-
-    def is_null(self, p):
-        return max(abs(float(x)) for x in p.offset_dn) < 1e-9

@@ -34,10 +34,19 @@ from typing import Any, ClassVar
 import numpy as np
 
 
-def quantity(unit: str, doc: str, *, scale: float | None = 1.0, default: Any = MISSING):
+def quantity(unit: str, doc: str, *, scale: float | None = 1.0, default: Any = MISSING,
+             profile: str | None = None, per_full_scale: bool = False, profile_default: Any = MISSING):
     """A parameter field: ``doc`` says what it is, ``unit`` is the unit the report shows it in and
-    ``scale`` the factor from the stored value to that unit (None: shown as it is, e.g. a name)."""
-    meta = {"unit": unit, "scale": scale, "doc": doc}
+    ``scale`` the factor from the stored value to that unit (None: shown as it is, e.g. a name).
+
+    ``profile``: the key of the field in the noise stage's effect entry, when the card's default
+    conversion (:class:`DeclaredProfileCard`) writes it there;
+    ``per_full_scale``: the entry holds it on normalised raw, ``value / (white - black)`` (the field
+    is in DN); ``profile_default``: the value read where an entry lacks the key (else a KeyError).
+    A ``list`` field is one value per 2x2 site (an entry's scalar is broadcast to the four sites).
+    """
+    meta = {"unit": unit, "scale": scale, "doc": doc, "profile": profile, "per_full_scale": per_full_scale,
+            "profile_default": profile_default}
     return field(metadata=meta) if default is MISSING else field(default=default, metadata=meta)
 
 
@@ -53,7 +62,25 @@ class EffectParams(Mapping):
 
     They also read as a mapping field -> value (optional fields that are None left out), the
     loop's former dicts: :meth:`to_dict` is what ``loop_model.yaml`` and ``report.json`` hold.
+    A subclass declares its fields with :func:`quantity` and is made a frozen dataclass on its
+    definition (no decorator).
+
+    Attributes
+    ----------
+    fields
+        The subclass's fields, each declared with :func:`quantity` (unit, doc, profile key).
+
+    Examples
+    --------
+    >>> from simcam.calibration.effects.dsnu import Dsnu
+    >>> p = Dsnu(sigma_dn=2.5)
+    >>> dict(p), p.format()
+    ({'sigma_dn': 2.5}, 'sigma_dn = 2.5 DN')
     """
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        dataclass(frozen=True)(cls)
 
     @classmethod
     def from_dict(cls, values: Mapping) -> EffectParams:
@@ -105,7 +132,27 @@ class EffectParams(Mapping):
 
 @dataclass(frozen=True)
 class Fit:
-    """A fit that also re-estimates the system gain K (DN/e-) with the effect's parameters."""
+    """A fit that also re-estimates the system gain K (DN/e-) with the effect's parameters.
+
+    Parameters
+    ----------
+    params : EffectParams
+        The fitted parameters.
+    K : float
+        The system gain re-estimated with them (DN/e-).
+
+    Attributes
+    ----------
+    params, K
+        As the parameters.
+
+    Examples
+    --------
+    >>> from simcam.calibration.effects.channel_gain import ChannelGain
+    >>> fit = Fit(ChannelGain(gains=[1.1, 1.0, 1.0, 0.9]), K=2.05)
+    >>> fit.K, fit.params.gains[0]
+    (2.05, 1.1)
+    """
 
     params: EffectParams
     K: float
@@ -121,6 +168,22 @@ class FitContext:
     :class:`~simcam.calibration.model.SimSpec`; ``simulate``: the loop's bootstrap,
     :func:`simcam.calibration.simulate.simulate_capture` (passed in: the cards sit below the
     simulator, which converts models through them).
+
+    Parameters
+    ----------
+    diagnostic, value, sim_mean, seed, dark_specs, simulate
+        As described above; all have defaults ("no such information").
+
+    Attributes
+    ----------
+    fields
+        As the parameters.
+
+    Examples
+    --------
+    >>> ctx = FitContext(diagnostic="frame_mean_jitter", value=3e-4, sim_mean=1e-4)
+    >>> round(ctx.value - ctx.sim_mean, 6), ctx.simulate is None
+    (0.0002, True)
     """
 
     diagnostic: str = ""
@@ -135,7 +198,28 @@ class FitContext:
 class ProfileTerm:
     """What one effect contributes to the noise stage's composite entry: ``effect``, its entry in
     the composite's effect list (None: none); ``beta1`` / ``beta2``, values that replace the
-    Poisson-Gaussian base's (normalised raw; None: unchanged)."""
+    Poisson-Gaussian base's (normalised raw; None: unchanged).
+
+    Parameters
+    ----------
+    effect : dict or None
+        The effect's entry in the composite's effect list.
+    beta1 : list or None
+        Per-site beta1 that replaces the base's (normalised raw).
+    beta2 : float or None
+        beta2 that replaces the base's (normalised raw).
+
+    Attributes
+    ----------
+    effect, beta1, beta2
+        As the parameters.
+
+    Examples
+    --------
+    >>> term = ProfileTerm(effect={"type": "dsnu", "sigma": 0.002})
+    >>> term.effect["type"], term.beta1, term.beta2
+    ('dsnu', None, None)
+    """
 
     effect: dict | None = None
     beta1: list | None = None
@@ -144,7 +228,30 @@ class ProfileTerm:
 
 class EffectCard:
     """One effect of the calibration loop's vocabulary (module docstring). Subclasses set the class
-    attributes and override the methods their effect needs; the defaults are "no contribution"."""
+    attributes and override the methods their effect needs; the defaults are "no contribution".
+
+    Attributes
+    ----------
+    name : str
+        The effect's name (and the noise stage's effect ``type``).
+    params : type
+        Its :class:`EffectParams` subclass.
+    diagnostics : tuple of str
+        The residual diagnostics that propose it.
+    fixed_pattern, gaussian, needs_darks, refit_on_change : bool
+        How the loop treats it (see the class attributes' comments).
+    marginal_rank : int or None
+        Position of its term in the closed-form marginal variance.
+    null_field, null_value : str or None, float
+        The parameter, and its value, that make the effect the identity.
+
+    Examples
+    --------
+    >>> from simcam.calibration.effects import card_for
+    >>> card = card_for("row_noise")
+    >>> card.diagnostics, card.marginal_rank, card.format({"sigma_dn": 1.5})
+    (('row_mean_excess',), 10, 'sigma_dn = 1.5 DN')
+    """
 
     #: the effect's name (and the noise stage's effect ``type``)
     name: ClassVar[str]
@@ -169,6 +276,17 @@ class EffectCard:
     refit_on_change: ClassVar[bool] = False
     #: the parameter whose zero makes the effect the identity (:meth:`is_null`; None: no such parameter)
     null_field: ClassVar[str | None] = None
+    #: the value of ``null_field`` that makes the effect the identity
+    null_value: ClassVar[float] = 0.0
+
+    def __init_subclass__(cls, **attrs):
+        """A card declares its class attributes as keywords of its class statement
+        (``class RowNoiseCard(OffsetSigmaCard, name="row_noise", params=RowNoise, ...)``)."""
+        super().__init_subclass__()
+        for key, value in attrs.items():
+            if key not in EffectCard.__annotations__:
+                raise TypeError(f"effect card {cls.__name__}: unknown attribute {key!r}")
+            setattr(cls, key, value)
 
     def fit(self, d, model, ctx: FitContext) -> EffectParams | Fit:
         """Parameters fitted on the capture ``d`` (``CaptureData``) given the current ``model``."""
@@ -205,8 +323,12 @@ class EffectCard:
         return None
 
     def is_null(self, p: EffectParams) -> bool:
-        """True when the fitted effect is the identity (nothing to add): its ``null_field`` is zero."""
-        return self.null_field is not None and abs(float(getattr(p, self.null_field))) < 1e-9
+        """True when the fitted effect is the identity (nothing to add): its ``null_field`` is
+        ``null_value`` (within 1e-9; a per-site list: at every site)."""
+        if self.null_field is None:
+            return False
+        v = getattr(p, self.null_field)
+        return max(abs(float(x) - self.null_value) for x in (v if isinstance(v, list) else [v])) < 1e-9
 
     def format(self, p: EffectParams | Mapping) -> str:
         """Parameters as the report shows them, with units (a mapping is read as this card's parameters)."""
@@ -218,35 +340,56 @@ class EffectCard:
         return f"<effect card {self.name}>"
 
 
-class OffsetSigmaCard(EffectCard):
+def _profile_fields(params: type[EffectParams]) -> list:
+    """The fields of ``params`` declared with a ``profile`` key, in field order."""
+    return [f for f in fields(params) if f.metadata.get("profile") is not None]
+
+
+class DeclaredProfileCard(EffectCard):
+    """A card whose noise-stage entry is declared by its parameter fields: each field with a ``profile``
+    key (:func:`quantity`) is one key of ``{type: <name>, ...}``, on normalised raw where
+    ``per_full_scale``; the conversion both ways is built from that declaration."""
+
+    def to_profile(self, p: EffectParams, model) -> ProfileTerm:
+        """Its part of the noise stage's composite entry (normalised raw):
+        ``{type: <name>, <key>: value}`` for each field declared with a ``profile`` key (:func:`quantity`)."""
+        entry: dict = {"type": self.name}
+        for f in _profile_fields(self.params):
+            v = getattr(p, f.name)
+            fs = model.full_scale_dn if f.metadata["per_full_scale"] else 1.0
+            entry[f.metadata["profile"]] = [float(x) / fs for x in v] if isinstance(v, list) else float(v / fs)
+        return ProfileTerm(effect=entry)
+
+    def from_profile(self, entry: Mapping, full_scale_dn: float) -> EffectParams:
+        """Parameters from the composite's effect entry of this ``type`` (``full_scale_dn``: white - black):
+        the inverse of :meth:`to_profile`'s, field by field."""
+        values = {}
+        for f in _profile_fields(self.params):
+            key, default = f.metadata["profile"], f.metadata.get("profile_default", MISSING)
+            raw = entry[key] if default is MISSING else entry.get(key, default)
+            if f.type in (list, "list"):  # one value per 2x2 site
+                a = np.asarray(raw, float)
+                values[f.name] = list(np.broadcast_to(a * full_scale_dn if f.metadata["per_full_scale"] else a, (4,)))
+            else:
+                values[f.name] = float(raw) * full_scale_dn if f.metadata["per_full_scale"] else float(raw)
+        return self.params(**values)
+
+
+class OffsetSigmaCard(DeclaredProfileCard, null_field="sigma_dn"):
     """An effect that is a zero-mean Gaussian offset of rms ``sigma_dn`` (DN) drawn per row and frame, per
     column or per pixel: it adds ``sigma_dn^2`` to the marginal variance, and its noise-stage entry is
-    ``{type: <name>, sigma: sigma_dn / (white - black)}`` (normalised raw)."""
-
-    null_field = "sigma_dn"
+    ``{type: <name>, sigma: sigma_dn / (white - black)}`` (normalised raw; the field declared with
+    ``profile="sigma", per_full_scale=True``)."""
 
     def marginal(self, p, v, lin, model):
         return v + p.sigma_dn ** 2
 
-    def to_profile(self, p, model):
-        return ProfileTerm(effect={"type": self.name, "sigma": float(p.sigma_dn / model.full_scale_dn)})
 
-    def from_profile(self, entry, full_scale_dn):
-        return self.params(sigma_dn=float(entry["sigma"]) * full_scale_dn)
-
-
-class GainSigmaCard(EffectCard):
+class GainSigmaCard(DeclaredProfileCard, null_field="sigma"):
     """An effect that is a zero-mean Gaussian relative gain of rms ``sigma`` (dimensionless) on the expected
     signal, drawn per pixel or per frame: it adds ``(sigma x)^2`` to the marginal variance (x the linear
-    signal above black, DN), and its noise-stage entry is ``{type: <name>, sigma}``."""
-
-    null_field = "sigma"
+    signal above black, DN), and its noise-stage entry is ``{type: <name>, sigma}`` (the field declared
+    with ``profile="sigma"``)."""
 
     def marginal(self, p, v, lin, model):
         return v + (p.sigma * lin) ** 2
-
-    def to_profile(self, p, model):
-        return ProfileTerm(effect={"type": self.name, "sigma": float(p.sigma)})
-
-    def from_profile(self, entry, full_scale_dn):
-        return self.params(sigma=float(entry["sigma"]))

@@ -20,23 +20,19 @@ a per-site ``beta1`` spread becomes ``channel_gain`` again, and so does a noise-
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from .. import diagnostics as dg
-from .card import EffectCard, EffectParams, Fit, ProfileTerm, quantity
+from .card import DeclaredProfileCard, EffectParams, Fit, ProfileTerm, quantity
 
 
-@dataclass(frozen=True)
 class ChannelGain(EffectParams):
-    gains: list = quantity("×", "relative gain of each 2x2 site (00, 01, 10, 11), dimensionless, mean 1 when fitted")
+    gains: list = quantity("×", "relative gain of each 2x2 site (00, 01, 10, 11), dimensionless, mean 1 when fitted",
+                           profile="gain")
 
 
-class ChannelGainCard(EffectCard):
-    name = "channel_gain"
-    params = ChannelGain
-    diagnostics = ("plane_gain_spread",)
+class ChannelGainCard(DeclaredProfileCard, name="channel_gain", params=ChannelGain, diagnostics=("plane_gain_spread",),
+                      null_field="gains", null_value=1.0):
 
     def fit(self, d, model, ctx):
         k = dg.plane_slopes(d)
@@ -47,14 +43,8 @@ class ChannelGainCard(EffectCard):
         fs = model.full_scale_dn
         return ProfileTerm(beta1=[float(model.K * g / fs) for g in p.gains])
 
-    def from_profile(self, entry, full_scale_dn):
-        return ChannelGain(gains=list(np.broadcast_to(np.asarray(entry["gain"], float), (4,))))
-
     def from_base(self, beta1_sites):
         b1 = float(np.mean(beta1_sites))
         if np.ptp(beta1_sites) > 0:
             return ChannelGain(gains=[float(x) for x in beta1_sites / b1])
         return None
-
-    def is_null(self, p):
-        return max(abs(float(g) - 1) for g in p.gains) < 1e-9

@@ -15,25 +15,18 @@ Profile. ``{type: column_fpn, sigma}`` with sigma on normalised raw, ``sigma_dn 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from .. import diagnostics as dg
 from .card import EffectParams, OffsetSigmaCard, quantity
 
 
-@dataclass(frozen=True)
 class ColumnFpn(EffectParams):
-    sigma_dn: float = quantity("DN", "rms of the per-column offset (DN)")
+    sigma_dn: float = quantity("DN", "rms of the per-column offset (DN)", profile="sigma", per_full_scale=True)
 
 
-class ColumnFpnCard(OffsetSigmaCard):
-    name = "column_fpn"
-    params = ColumnFpn
-    diagnostics = ("col_fpn_excess",)
-    fixed_pattern = True
-    marginal_rank = 70
+class ColumnFpnCard(OffsetSigmaCard, name="column_fpn", params=ColumnFpn, diagnostics=("col_fpn_excess",),
+                    fixed_pattern=True, marginal_rank=70):
 
     def fit(self, d, model, ctx):
         """sigma_col^2 = covariance of the column profiles of the even- and odd-frame mean maps."""

@@ -31,26 +31,22 @@ exposures of flats and scenes.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 from ..dark_current import series_fit
-from .card import EffectCard, EffectParams, ProfileTerm, quantity
+from .card import DeclaredProfileCard, EffectParams, quantity
 
 
-@dataclass(frozen=True)
 class DarkCurrent(EffectParams):
-    rate_e_per_s: float = quantity("e-/s", "mean dark current over the pixels, electrons per second")
-    log_sigma: float = quantity("ln", "dark-current non-uniformity: standard deviation of the log of a pixel's rate")
-    gain_dn_per_e: float = quantity("DN/e-", "system gain the electrons are converted with (DN per electron)")
+    rate_e_per_s: float = quantity("e-/s", "mean dark current over the pixels, electrons per second", profile="rate")
+    log_sigma: float = quantity("ln", "dark-current non-uniformity: standard deviation of the log of a pixel's rate",
+                                profile="dcnu_log_sigma", profile_default=0.0)
+    gain_dn_per_e: float = quantity("DN/e-", "system gain the electrons are converted with (DN per electron)",
+                                    profile="electron", per_full_scale=True)
     read_exposure_s: float = quantity("s", "exposure time of the darks the read noise is measured on (s)",
                                       default=0.0)
 
 
-class DarkCurrentCard(EffectCard):
-    name = "dark_current"
-    params = DarkCurrent
-    diagnostics = ("dark_signal_slope",)
-    null_field = "rate_e_per_s"
+class DarkCurrentCard(DeclaredProfileCard, name="dark_current", params=DarkCurrent, diagnostics=("dark_signal_slope",),
+                      null_field="rate_e_per_s"):
 
     def fit(self, d, model, ctx):
         r = series_fit(d.dark_series or [], model.K)
@@ -61,12 +57,3 @@ class DarkCurrentCard(EffectCard):
 
     def dark_variance_dn2(self, p):
         return float(p.gain_dn_per_e ** 2 * p.rate_e_per_s * p.read_exposure_s)
-
-    def to_profile(self, p, model):
-        return ProfileTerm(effect={"type": "dark_current", "rate": float(p.rate_e_per_s),
-                                   "dcnu_log_sigma": float(p.log_sigma),
-                                   "electron": float(p.gain_dn_per_e / model.full_scale_dn)})
-
-    def from_profile(self, entry, full_scale_dn):
-        return DarkCurrent(rate_e_per_s=float(entry["rate"]), log_sigma=float(entry.get("dcnu_log_sigma", 0.0)),
-                           gain_dn_per_e=float(entry["electron"]) * full_scale_dn)

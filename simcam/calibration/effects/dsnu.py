@@ -16,25 +16,18 @@ Profile. ``{type: dsnu, sigma}`` with sigma on normalised raw, ``sigma_dn / (whi
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from .. import diagnostics as dg
 from .card import EffectParams, OffsetSigmaCard, quantity
 
 
-@dataclass(frozen=True)
 class Dsnu(EffectParams):
-    sigma_dn: float = quantity("DN", "rms of the per-pixel offset (DN)")
+    sigma_dn: float = quantity("DN", "rms of the per-pixel offset (DN)", profile="sigma", per_full_scale=True)
 
 
-class DsnuCard(OffsetSigmaCard):
-    name = "dsnu"
-    params = Dsnu
-    diagnostics = ("dsnu_excess",)
-    fixed_pattern = True
-    marginal_rank = 60
+class DsnuCard(OffsetSigmaCard, name="dsnu", params=Dsnu, diagnostics=("dsnu_excess",), fixed_pattern=True,
+               marginal_rank=60):
 
     def fit(self, d, model, ctx):
         m, vt, n = d.dark_map()

@@ -16,24 +16,18 @@ Profile. ``{type: frame_flicker, sigma}``: the same dimensionless sigma.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from .card import EffectParams, GainSigmaCard, quantity
 
 
-@dataclass(frozen=True)
 class FrameFlicker(EffectParams):
     sigma: float = quantity("%", "rms relative deviation of a frame's illumination gain (dimensionless; shown in %)",
-                            scale=100.0)
+                            scale=100.0, profile="sigma")
 
 
-class FrameFlickerCard(GainSigmaCard):
-    name = "frame_flicker"
-    params = FrameFlicker
-    diagnostics = ("frame_mean_jitter",)
-    marginal_rank = 30
+class FrameFlickerCard(GainSigmaCard, name="frame_flicker", params=FrameFlicker, diagnostics=("frame_mean_jitter",),
+                       marginal_rank=30):
 
     def fit(self, d, model, ctx):
         excess = ctx.value - ctx.sim_mean

@@ -19,12 +19,11 @@ the read variance is the base's plus ``(scale (white - black))^2 var(TukeyLambda
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from math import gamma
 
 import numpy as np
 
-from .card import EffectCard, EffectParams, ProfileTerm, quantity
+from .card import DeclaredProfileCard, EffectParams, ProfileTerm, quantity
 from .indirect import indirect_fit_joint
 
 #: grid of the indirect fit (lam = 0.14 is nearly Gaussian; below -0.45 the variance diverges at -0.5)
@@ -38,17 +37,13 @@ def tukey_var(lam: float) -> float:
     return 2.0 / lam ** 2 * (1.0 / (1 + 2 * lam) - gamma(lam + 1) ** 2 / gamma(2 * lam + 2))
 
 
-@dataclass(frozen=True)
 class HeavyTailRead(EffectParams):
-    lam: float = quantity("", "Tukey-lambda shape of the read noise (dimensionless; 0.14 ~ Gaussian, smaller: heavier tail)")
+    lam: float = quantity("", "Tukey-lambda shape of the read noise (dimensionless; 0.14 ~ Gaussian, smaller: heavier tail)",
+                          profile="lam")
 
 
-class HeavyTailReadCard(EffectCard):
-    name = "heavy_tail_read"
-    params = HeavyTailRead
-    diagnostics = ("dark_tail_mass", "dark_ppcc_lambda")
-    gaussian = False
-    needs_darks = True
+class HeavyTailReadCard(DeclaredProfileCard, name="heavy_tail_read", params=HeavyTailRead,
+                        diagnostics=("dark_tail_mass", "dark_ppcc_lambda"), gaussian=False, needs_darks=True):
 
     def fit(self, d, model, ctx):
         lam = indirect_fit_joint(d, model, self.name, lambda g: HeavyTailRead(lam=float(g)), list(GRID),
@@ -56,11 +51,10 @@ class HeavyTailReadCard(EffectCard):
         return HeavyTailRead(lam=float(np.clip(lam, -0.45, 0.14)))
 
     def to_profile(self, p, model):
-        scale = model.read_dn / np.sqrt(tukey_var(p.lam)) / model.full_scale_dn
-        return ProfileTerm(effect={"type": "heavy_tail_read", "lam": float(p.lam), "scale": float(scale)}, beta2=0.0)
-
-    def from_profile(self, entry, full_scale_dn):
-        return HeavyTailRead(lam=float(entry["lam"]))
+        """``{type, lam, scale}`` and beta2 = 0: the read noise moves into the effect."""
+        entry = super().to_profile(p, model).effect
+        entry["scale"] = float(model.read_dn / np.sqrt(tukey_var(p.lam)) / model.full_scale_dn)
+        return ProfileTerm(effect=entry, beta2=0.0)
 
     def profile_read_dn(self, entry, full_scale_dn, read_dn):
         return float(np.sqrt(read_dn ** 2 + (entry["scale"] * full_scale_dn) ** 2 * tukey_var(entry["lam"])))

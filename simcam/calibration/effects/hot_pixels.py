@@ -35,15 +35,12 @@ Poisson electrons each frame.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from .. import diagnostics as dg
 from .card import EffectCard, EffectParams, ProfileTerm, quantity
 
 
-@dataclass(frozen=True)
 class HotPixels(EffectParams):
     fraction: float = quantity("%", "fraction of the pixels that are hot (dimensionless; shown in %)", scale=100.0)
     log_mean: float = quantity("ln DN", "mean of the natural log of a hot pixel's offset in DN")
@@ -55,14 +52,8 @@ class HotPixels(EffectParams):
                                            default=None)
 
 
-class HotPixelsCard(EffectCard):
-    name = "hot_pixels"
-    params = HotPixels
-    null_field = "fraction"
-    diagnostics = ("hot_pixel_tail",)
-    fixed_pattern = True
-    gaussian = False
-
+class HotPixelsCard(EffectCard, name="hot_pixels", params=HotPixels, null_field="fraction", diagnostics=("hot_pixel_tail",),
+                    fixed_pattern=True, gaussian=False):
     def fit(self, d, model, ctx):
         m, _vt, _n = d.dark_map()
         r = dg.remove_profiles(m)

@@ -19,26 +19,18 @@ Profile. ``{type: nonlinearity, strength}`` with ``strength = -c`` (the noise st
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from .card import EffectCard, EffectParams, Fit, ProfileTerm, quantity
 
 
-@dataclass(frozen=True)
 class Nonlinearity(EffectParams):
     c: float = quantity("% at white", "curvature of y = x + c x^2 / (white - black) (dimensionless: the relative "
                         "response error at white; shown in %)", scale=100.0)
 
 
-class NonlinearityCard(EffectCard):
-    name = "nonlinearity"
-    params = Nonlinearity
-    null_field = "c"
-    diagnostics = ("ptc_curvature",)
-    marginal_rank = 50
-
+class NonlinearityCard(EffectCard, name="nonlinearity", params=Nonlinearity, null_field="c", diagnostics=("ptc_curvature",),
+                       marginal_rank=50):
     def fit(self, d, model, ctx):
         """Least squares of var(y) = (1 + 2c x/s)^2 (K g x + r) with y = x + c x^2/s over the PTC points."""
         from scipy.optimize import least_squares

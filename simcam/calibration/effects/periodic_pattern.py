@@ -18,15 +18,12 @@ amplitude on normalised raw, ``amplitude_dn / (white - black)``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from .. import diagnostics as dg
 from .card import EffectCard, EffectParams, ProfileTerm, quantity
 
 
-@dataclass(frozen=True)
 class PeriodicPattern(EffectParams):
     amplitude_dn: float = quantity("DN", "amplitude of the sinusoid (DN)")
     period_px: float = quantity("px", "period along the axis (pixels)")
@@ -34,13 +31,8 @@ class PeriodicPattern(EffectParams):
                          scale=None, default="row")
 
 
-class PeriodicPatternCard(EffectCard):
-    name = "periodic_pattern"
-    params = PeriodicPattern
-    null_field = "amplitude_dn"
-    diagnostics = ("row_spectrum_peak", "col_spectrum_peak")
-    marginal_rank = 20
-
+class PeriodicPatternCard(EffectCard, name="periodic_pattern", params=PeriodicPattern, null_field="amplitude_dn",
+                          diagnostics=("row_spectrum_peak", "col_spectrum_peak"), marginal_rank=20):
     def fit(self, d, model, ctx):
         """Sinusoid in the row (or column) means of the temporal residual: peak of the whitened
         periodogram, frequency refined to 1/40 bin, amplitude^2 from the per-frame sine/cosine

@@ -18,26 +18,19 @@ Profile. ``{type: prnu, sigma}``: the same dimensionless sigma.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from .. import diagnostics as dg
 from .card import EffectParams, GainSigmaCard, quantity
 
 
-@dataclass(frozen=True)
 class Prnu(EffectParams):
-    sigma: float = quantity("%", "rms relative deviation of the per-pixel gain (dimensionless; shown in %)", scale=100.0)
+    sigma: float = quantity("%", "rms relative deviation of the per-pixel gain (dimensionless; shown in %)", scale=100.0,
+                            profile="sigma")
 
 
-class PrnuCard(GainSigmaCard):
-    name = "prnu"
-    params = Prnu
-    diagnostics = ("prnu_excess",)
-    fixed_pattern = True
-    marginal_rank = 40
-    refit_on_change = True
+class PrnuCard(GainSigmaCard, name="prnu", params=Prnu, diagnostics=("prnu_excess",), fixed_pattern=True, marginal_rank=40,
+               refit_on_change=True):
 
     def fit(self, d, model, ctx):
         v = dg.prnu_excess(d)

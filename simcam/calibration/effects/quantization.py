@@ -17,22 +17,16 @@ Profile. ``{type: quantization, range_dn, step_dn, offset_dn}``: the ADC on norm
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from .card import EffectCard, EffectParams, ProfileTerm, quantity
+from .card import DeclaredProfileCard, EffectParams, ProfileTerm, quantity
 
 
-@dataclass(frozen=True)
 class Quantization(EffectParams):
-    step_dn: float = quantity("DN", "distance between adjacent ADC codes (DN, >= 1)")
+    step_dn: float = quantity("DN", "distance between adjacent ADC codes (DN, >= 1)", profile="step_dn", profile_default=1.0)
 
 
-class QuantizationCard(EffectCard):
-    name = "quantization"
-    params = Quantization
-    diagnostics = ("code_occupancy",)
+class QuantizationCard(DeclaredProfileCard, name="quantization", params=Quantization, diagnostics=("code_occupancy",)):
 
     def fit(self, d, model, ctx):
         src = d.darks or sorted(d.flats, key=lambda a: float(a.mean()))[:1]
@@ -46,9 +40,6 @@ class QuantizationCard(EffectCard):
     def to_profile(self, p, model):
         return ProfileTerm(effect={"type": "quantization", "range_dn": float(model.full_scale_dn),
                                    "step_dn": float(p.step_dn), "offset_dn": float(np.mean(model.black_dn))})
-
-    def from_profile(self, entry, full_scale_dn):
-        return Quantization(step_dn=float(entry.get("step_dn", 1.0)))
 
     def is_null(self, p):
         return float(p.step_dn) <= 1.0

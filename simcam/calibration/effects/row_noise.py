@@ -17,23 +17,16 @@ Profile. ``{type: row_noise, sigma}`` with sigma on normalised raw, ``sigma_dn /
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from .card import EffectParams, OffsetSigmaCard, quantity
 
 
-@dataclass(frozen=True)
 class RowNoise(EffectParams):
-    sigma_dn: float = quantity("DN", "rms of a row's offset in one frame (DN)")
+    sigma_dn: float = quantity("DN", "rms of a row's offset in one frame (DN)", profile="sigma", per_full_scale=True)
 
 
-class RowNoiseCard(OffsetSigmaCard):
-    name = "row_noise"
-    params = RowNoise
-    diagnostics = ("row_mean_excess",)
-    marginal_rank = 10
+class RowNoiseCard(OffsetSigmaCard, name="row_noise", params=RowNoise, diagnostics=("row_mean_excess",), marginal_rank=10):
 
     def fit(self, d, model, ctx):
         res = d.temporal_residuals("dark") or d.temporal_residuals("flat")

@@ -17,36 +17,24 @@ Profile. ``{type: spatial_correlation, coefficient}``: the loop's ``a`` (same ke
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from .card import EffectCard, EffectParams, ProfileTerm, quantity
+from .card import DeclaredProfileCard, EffectParams, quantity
 from .indirect import indirect_fit
 
 #: grid of the indirect fit
 GRID = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5)
 
 
-@dataclass(frozen=True)
 class SpatialCorrelation(EffectParams):
-    a: float = quantity("", "coupling of the in-plane [a, 1, a] kernel of the read noise (dimensionless, 0 to 0.5)")
+    a: float = quantity("", "coupling of the in-plane [a, 1, a] kernel of the read noise (dimensionless, 0 to 0.5)",
+                        profile="coefficient")
 
 
-class SpatialCorrelationCard(EffectCard):
-    name = "spatial_correlation"
-    params = SpatialCorrelation
-    null_field = "a"
-    diagnostics = ("lag1_corr", "lag2_corr")
-    needs_darks = True
+class SpatialCorrelationCard(DeclaredProfileCard, name="spatial_correlation", params=SpatialCorrelation, null_field="a",
+                             diagnostics=("lag1_corr", "lag2_corr"), needs_darks=True):
 
     def fit(self, d, model, ctx):
         a = indirect_fit(d, model, self.name, lambda g: SpatialCorrelation(a=float(g)), list(GRID), "lag1_corr",
                          ctx.dark_specs, ctx.seed, ctx.simulate)
         return SpatialCorrelation(a=float(np.clip(a, 0.0, 0.5)))
-
-    def to_profile(self, p, model):
-        return ProfileTerm(effect={"type": "spatial_correlation", "coefficient": float(p.a)})
-
-    def from_profile(self, entry, full_scale_dn):
-        return SpatialCorrelation(a=float(entry["coefficient"]))

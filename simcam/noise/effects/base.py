@@ -33,22 +33,49 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, ClassVar, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict
 
 from ...errors import NoiseModelError
-from ..base import BLOCK_ROWS, block_rng, from_registry, site_map, site_values
+from ...registry import Registry
+from ..base import BLOCK_ROWS, ProfileEntryModel, block_rng, from_registry, site_map, site_values
 
 EFFECT_NAMES = ("row_noise", "column_fpn", "dsnu", "prnu", "hot_pixels", "heavy_tail_read", "quantization",
                 "spatial_correlation", "periodic_pattern", "black_level_offset", "frame_flicker", "nonlinearity",
                 "channel_gain", "dark_current", "amp_glow", "dead_pixels", "adc_dnl", "rtn", "charge_crosstalk",
                 "empirical_offset", "empirical_gain", "empirical_code", "empirical_field")
 
-_EFFECTS: dict[str, type["Effect"]] = {}
+_EFFECTS = Registry("effect type")
 
 
 @dataclass
 class EffectContext:
-    """What an effect sees when applied to one frame."""
+    """What an effect sees when applied to one frame.
+
+    Parameters
+    ----------
+    cfa : str or None
+        Bayer pattern of the frame.
+    key : ndarray or None
+        The frame key of per-frame draws (None in ``log_prob``).
+    stream : int
+        Separates this effect's row-block streams from the base model's.
+    fixed, frame : dict
+        What :meth:`Effect.fixed` and :meth:`Effect.frame` drew.
+    signal, read : ndarray or None
+        Expected signal after the signal-stage effects; read noise so far (when needed).
+    exposure_s : float or None
+        Exposure time of the frame, seconds.
+
+    Attributes
+    ----------
+    cfa, key, stream, fixed, frame, signal, read, exposure_s
+        As the parameters; :meth:`block_rng` gives the generator of a row block.
+
+    Examples
+    --------
+    >>> ctx = EffectContext(cfa="RGGB", key=None, stream=1)
+    >>> ctx.fixed, ctx.exposure_s
+    ({}, None)
+    """
 
     cfa: str | None
     key: np.ndarray | None  # frame key (None in log_prob: per-frame draws unavailable)
@@ -68,12 +95,32 @@ class EffectContext:
         return block_rng(self.key, block, stream=self.stream)
 
 
-class Effect(BaseModel):
-    """Base class of effects (see module docstring)."""
+class Effect(ProfileEntryModel):
+    """Base class of effects (see module docstring).
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    Parameters
+    ----------
+    type : str
+        The effect's name, one of :data:`EFFECT_NAMES` (subclasses fix it as a ``Literal`` default).
+    **params
+        The effect's own fields (pydantic, ``extra="forbid"``, frozen): its profile entry.
 
-    type: str
+    Attributes
+    ----------
+    stage : {"signal", "readout"}
+        Where it acts: on the expected signal, or on the noisy value after the base model.
+    logprob_role : str or None
+        How a composite's ``log_prob`` treats it (module docstring).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import simcam.noise
+    >>> fpn = effect_from_entry({"type": "column_fpn", "sigma": 0.01})
+    >>> fpn.stage, fpn.to_entry()["sigma"]
+    ('readout', 0.01)
+    """
+
     stage: ClassVar[Literal["signal", "readout"]] = "readout"
     logprob_role: ClassVar[str | None] = None
     #: True for effects acting on the read noise alone (the composite then samples it apart).
@@ -81,9 +128,6 @@ class Effect(BaseModel):
     #: True when ``apply`` is elementwise or broadcasts a fixed (H, W) map, needs no per-frame
     #: draw, and so may be given a whole (n, H, W) stack at once (``Composite.sample_frames``).
     stack_ok: ClassVar[bool] = False
-
-    def to_entry(self) -> dict[str, Any]:
-        return self.model_dump(mode="json")
 
     @classmethod
     def from_entry(cls, entry: dict[str, Any], *, where: str = "effect") -> "Effect":
@@ -118,10 +162,47 @@ def register_effect(cls: type[Effect]) -> type[Effect]:
 
 
 def effect_types() -> dict[str, type[Effect]]:
-    return dict(_EFFECTS)
+    """All registered effect classes by ``type`` name (:mod:`simcam.noise` registers them).
+
+    Returns
+    -------
+    dict of str to type
+        A copy of the registry: ``{name: Effect subclass}``.
+
+    Examples
+    --------
+    >>> import simcam.noise
+    >>> sorted(effect_types())[:3]
+    ['adc_dnl', 'amp_glow', 'black_level_offset']
+    """
+    return _EFFECTS.types()
 
 
 def effect_from_entry(entry: Any, *, where: str = "effect") -> Effect:
+    """Build an effect from its profile entry ``{type: ..., **params}`` or raise NoiseModelError.
+
+    Parameters
+    ----------
+    entry : dict or Effect
+        An entry of a composite model's ``effects:`` list (an effect is returned as is).
+    where : str
+        Location named in the error message.
+
+    Returns
+    -------
+    Effect
+        An instance of the class registered under ``entry["type"]``.
+
+    Examples
+    --------
+    >>> import simcam.noise
+    >>> effect_from_entry({"type": "row_noise", "sigma": 0.002}).sigma
+    0.002
+    >>> effect_from_entry({"type": "blur"}, where="profile.yaml: effects[0]")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    simcam.errors.NoiseModelError: profile.yaml: effects[0]...
+    """
     return from_registry(entry, _EFFECTS, base=Effect, noun="effect", expected=list(EFFECT_NAMES), where=where)
 
 

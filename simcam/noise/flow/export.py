@@ -123,6 +123,15 @@ def export_onnx(flow: NoiseFlow, out, *, source: str = "simcam", legacy_iso: boo
     -------
     (Path, Path)
         Sampler and likelihood paths.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from simcam.noise.flow import FlowConfig, NoiseFlow
+    >>> tiny = NoiseFlow(FlowConfig(cameras=["GP"], iso_knots=[100.0, 1600.0]))
+    >>> sampler, loglik = export_onnx(tiny, tempfile.mkdtemp() + "/flow.onnx")
+    >>> sampler.name, loglik.name
+    ('flow.onnx', 'flow.loglik.onnx')
     """
     out = Path(out)
     if out.suffix != ".onnx":

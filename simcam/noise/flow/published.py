@@ -50,6 +50,17 @@ def load_published(path, *, legacy_iso: bool = False, dtype=None) -> NoiseFlow:
     -------
     NoiseFlow
         In eval mode (batch norm uses the stored moving statistics).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> import numpy as np
+    >>> path = tempfile.mkdtemp() + "/not_the_weights.npz"
+    >>> np.savez(path, x=np.zeros(1))
+    >>> load_published(path)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    simcam.errors.NoiseModelError: ...: variable 'model/sdn_gain/beta1' missing (expected the released checkpoint)
     """
     path = Path(path)
     try:
