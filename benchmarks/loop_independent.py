@@ -45,6 +45,9 @@ from simcam.calibration.effects import CARDS  # noqa: E402
 #: the loop's named effects (its effect cards: what it may add); anything else in a truth manifest is
 #: outside the vocabulary
 VOCABULARY = tuple(CARDS)
+#: the generator's names for what one card of the loop covers: ``dead_pixels`` is dead *and* stuck
+#: pixels (defects that do not respond to light, ``simcam/calibration/effects/dead_pixels.py``)
+ALIASES = {"stuck_pixels": "dead_pixels"}
 
 
 
@@ -58,6 +61,7 @@ def judge(truth_effects: set[str], report: dict) -> dict:
         unexplained |= {u["diagnostic"] for u in g["unexplained"]}
         h = g["heldout"]
         kl_rows.append((g["iso_label"], h.get("kl_structured_base"), h.get("kl_structured_final"), bool(g["effects"])))
+    truth_effects = {ALIASES.get(e, e) for e in truth_effects}
     in_vocab = truth_effects & set(VOCABULARY)
     missed = sorted(in_vocab - named)
     wrong = sorted(named - truth_effects)

@@ -63,7 +63,7 @@ DIAGNOSTICS = (
     "ptc_curvature", "plane_gain_spread", "row_mean_excess", "row_spectrum_peak", "col_spectrum_peak",
     "col_temporal_excess", "dark_checker_jitter", "col_fpn_excess", "dsnu_excess", "hot_pixel_tail", "prnu_excess",
     "black_offset", "dark_signal_slope", "frame_mean_jitter", "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "lag1_corr",
-    "lag2_corr",
+    "lag2_corr", "defect_pixels",
 )
 
 #: When the diagnostic on the left is chosen but one on the right is also
@@ -74,8 +74,10 @@ PRECEDENCE = {
     "col_temporal_excess": ("col_spectrum_peak",),
     # in-plane crosstalk and quantisation change the spread of per-site means too
     "dark_checker_jitter": ("lag1_corr", "lag2_corr", "code_occupancy"),
-    "dsnu_excess": ("hot_pixel_tail",),
-    "col_fpn_excess": ("hot_pixel_tail", "dsnu_excess"),  # per-pixel fixed offsets leak into column means
+    "dsnu_excess": ("hot_pixel_tail", "defect_pixels"),
+    "col_fpn_excess": ("hot_pixel_tail", "dsnu_excess", "defect_pixels"),  # per-pixel fixed offsets leak into column means
+    # a pixel stuck at a high code is also a persistent dark outlier; it does not respond to light
+    "hot_pixel_tail": ("defect_pixels",),
     # a dark current is the one symptom at every exposure time; at the shortest one it lifts the dark level
     "black_offset": ("dark_signal_slope", "hot_pixel_tail", "col_fpn_excess", "dsnu_excess"),
     "frame_mean_jitter": ("row_spectrum_peak", "row_mean_excess", "col_spectrum_peak"),
@@ -122,6 +124,7 @@ NEEDS = {
     "code_occupancy": "needs a dark or flat sequence",
     "lag1_corr": "needs a dark sequence",
     "lag2_corr": "needs a dark sequence",
+    "defect_pixels": "needs a flat sequence (and darks or a declared black level)",
 }
 
 
@@ -457,6 +460,56 @@ def hot_pixel_mask(d: CaptureData) -> np.ndarray | None:
     return d.cache["hotmask"]
 
 
+#: response (flat minus dark, per pixel) below this share of its CFA plane's median: no photo-response
+DEAD_RESPONSE = 0.25
+
+
+def defect_masks(d: CaptureData) -> tuple[np.ndarray, np.ndarray] | None:
+    """(dead, stuck) pixel masks of the flat of :meth:`CaptureData.flat_map` (EMVA 1288 Release 4.0
+    sec. 8.5, defect pixels; A. Abdelhamed, *Noise Modelling for Smartphone Cameras*, PhD dissertation,
+    York University, 2020, ch. 2, defective pixels): *stuck* pixels read the same code in every frame
+    of the flat; *dead* pixels (not stuck) respond with less than :data:`DEAD_RESPONSE` of their CFA
+    plane's median signal (flat mean map minus the dark mean map, or minus the declared black).
+    A hot pixel still responds to light, so it is neither."""
+    if "defects" in d.cache:
+        return d.cache["defects"]
+    fm = d.flat_map()
+    if fm is None:
+        return None
+    f = max(d.flats, key=lambda a: (a.shape[0], float(a.mean())))  # the flat of flat_map
+    dm = d.dark_map()
+    if dm is not None and dm[0].shape == fm[0].shape:
+        base = dm[0]
+    elif d.black_dn is not None:
+        base = np.asarray(d.black_dn, np.float64)[0, 0] if d.cfa is None else None
+        if base is None:
+            base = np.empty(fm[0].shape)
+            for dy, dx in PLANE_OFFSETS:
+                base[dy::2, dx::2] = np.asarray(d.black_dn, np.float64)[dy, dx]
+    else:
+        raise NotApplicable("no dark sequence and no declared black level: the flat's response is unknown")
+    resp = fm[0] - base
+    dead = np.zeros(resp.shape, bool)
+    for dy, dx in PLANE_OFFSETS if d.cfa is not None else ((0, 0),):
+        step = 2 if d.cfa is not None else 1
+        r = resp[dy::step, dx::step]
+        med = float(np.median(r))
+        sd = np.sqrt(max(fm[1], 0.0) / fm[2])  # temporal noise of a pixel's mean over the flat's frames
+        if not med > max(20.0 * sd, 1.0):
+            raise NotApplicable("the flat's signal above the dark level is under 20 x the noise of its mean "
+                                "map (or 1 DN): a pixel without photo-response is not told apart")
+        dead[dy::step, dx::step] = r < DEAD_RESPONSE * med
+    stuck = np.all(f == f[:1], axis=0)
+    d.cache["defects"] = (dead & ~stuck, stuck)
+    return d.cache["defects"]
+
+
+def defect_pixels(d: CaptureData):
+    """Share of the pixels that are dead or stuck (:func:`defect_masks`)."""
+    m = defect_masks(d)
+    return None if m is None else float(np.mean(m[0] | m[1]))
+
+
 def hot_pixel_tail(d: CaptureData):
     mask = hot_pixel_mask(d)
     return None if mask is None else float(np.mean(mask))
@@ -669,6 +722,9 @@ def resolution(name: str, d: CaptureData) -> float:
     if name == "hot_pixel_tail":
         dm = d.dark_map()
         return 1.0 / dm[0].size if dm is not None else 0.0
+    if name == "defect_pixels":  # one pixel
+        fm = d.flat_map()
+        return 1.0 / fm[0].size if fm is not None else 0.0
     if name == "dark_tail_mass":
         x = dark_residual_sample(d)
         return 1.0 / x.size if x is not None else 0.0

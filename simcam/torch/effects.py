@@ -199,7 +199,11 @@ def quantization(group: Group, x, ctx: Ctx, st: EffectState):
 # -- effects added with measured maps, dark signal and ADC models -----------------
 
 def dead_pixels(group: Group, x, ctx: Ctx, st: EffectState):
-    return torch.where(st.fixed("set_mask"), st.fixed("set_value"), x)
+    """Stuck and dead pixels set; dead pixels that keep their read noise (``dead_read_noise``) read it."""
+    x = torch.where(st.fixed("set_mask"), st.fixed("set_value"), x)
+    if st.read is not None:
+        x = torch.where(st.fixed("read_mask"), st.read, x)
+    return x
 
 
 def rtn(group: Group, x, ctx: Ctx, st: EffectState):
@@ -336,10 +340,12 @@ def fixed_arrays(effect, fixed: dict[str, Any], shape: tuple[int, int]) -> dict[
     if t == "dead_pixels":
         mask = np.zeros(h * w, bool)
         val = np.zeros(h * w, np.float64)
-        mask[fixed["dead"]] = True
+        read_mask = np.zeros(h * w, bool)
+        (read_mask if effect.needs_read else mask)[fixed["dead"]] = True
         mask[fixed["stuck"]] = True
         val[fixed["stuck"]] = np.float32(effect.stuck_value)
-        return {"set_mask": mask.reshape(1, h, w), "set_value": val.reshape(1, h, w)}
+        return {"set_mask": mask.reshape(1, h, w), "set_value": val.reshape(1, h, w),
+                "read_mask": read_mask.reshape(1, h, w)}
     if t == "rtn":
         amp = np.zeros(h * w, np.float64)
         amp[fixed["index"]] = fixed["amplitude"]

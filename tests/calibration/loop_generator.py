@@ -44,7 +44,7 @@ import yaml
 EFFECTS = (
     "row_noise", "column_fpn", "dsnu", "prnu", "hot_pixels", "heavy_tail_read", "quantization",
     "spatial_correlation", "periodic_pattern", "black_level_offset", "frame_flicker",
-    "nonlinearity", "channel_gain", "dark_current",
+    "nonlinearity", "channel_gain", "dark_current", "dead_pixels",
 )
 
 #: Parameters the tests use for each effect alone (chosen well above the
@@ -64,6 +64,7 @@ DEFAULT_EFFECTS = {
     "nonlinearity": {"c": -0.12},
     "channel_gain": {"gains": [1.15, 1.0, 1.0, 0.85]},
     "dark_current": {"rate_e_per_s": 40.0, "log_sigma": 0.3},
+    "dead_pixels": {"dead_fraction": 0.004, "stuck_fraction": 0.002},
 }
 
 
@@ -146,6 +147,12 @@ class HiddenEffectSensor:
             g = eff["channel_gain"]["gains"]
             for k, (dy, dx) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):
                 self.gain[dy::2, dx::2] = g[k]
+        self.dead = self.stuck = None
+        if "dead_pixels" in eff:  # drawn last: the other effects' patterns are those of a sensor without
+            p = eff["dead_pixels"]
+            u = rng.random((h, w))
+            self.dead = u < p["dead_fraction"]  # no photo-response: black + read noise
+            self.stuck = (u >= p["dead_fraction"]) & (u < p["dead_fraction"] + p["stuck_fraction"])  # white
 
     def frames(self, mu_e: np.ndarray | float, n_frames: int, rng, exposure_s: float = 0.01) -> np.ndarray:
         """``n_frames`` x H x W frames in DN (float32 holding integer codes) at ``exposure_s`` seconds."""
@@ -160,6 +167,8 @@ class HiddenEffectSensor:
             e = rng.poisson(np.maximum(lam, 0))
             if self.dark_rate is not None:
                 e = e + rng.poisson(self.dark_rate * exposure_s)
+            if self.dead is not None:
+                e = np.where(self.dead, 0, e)
             x = s.K * self.gain * e
             if "heavy_tail_read" in eff:
                 t = eff["heavy_tail_read"]["lam"]
@@ -184,6 +193,8 @@ class HiddenEffectSensor:
             v = s.black_dn + eff.get("black_level_offset", {}).get("offset_dn", 0.0) + self.offset + x
             q = eff.get("quantization", {}).get("step_dn", 1)
             out[f] = np.clip(np.round(v / q) * q, 0, s.white_dn)
+            if self.stuck is not None:
+                out[f][self.stuck] = s.white_dn
         return out
 
 

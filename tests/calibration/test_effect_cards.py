@@ -17,6 +17,7 @@ from simcam.calibration.effects.black_level_offset import BlackLevelOffset
 from simcam.calibration.effects.channel_gain import ChannelGain
 from simcam.calibration.effects.column_fpn import ColumnFpn
 from simcam.calibration.effects.dark_current import DarkCurrent
+from simcam.calibration.effects.dead_pixels import DeadPixels
 from simcam.calibration.effects.dsnu import Dsnu
 from simcam.calibration.effects.frame_flicker import FrameFlicker
 from simcam.calibration.effects.heavy_tail_read import HeavyTailRead
@@ -46,6 +47,7 @@ EXAMPLES = {
     "column_fpn": ColumnFpn(sigma_dn=1.0),
     "dsnu": Dsnu(sigma_dn=2.0),
     "hot_pixels": HotPixels(fraction=0.004, log_mean=3.9, log_sigma=0.75, count=16),
+    "dead_pixels": DeadPixels(dead_fraction=0.004, stuck_fraction=0.002, stuck_value_dn=959.0, count=24),
     "black_level_offset": BlackLevelOffset(offset_dn=[6.0, 5.5, 6.5, 6.0]),
     "quantization": Quantization(step_dn=4.0),
 }
@@ -114,7 +116,7 @@ def test_card_profile_round_trip(name):
     else:  # carried by the base: per-site beta1
         back = c.from_base(np.asarray(term.beta1))
     want = p.to_dict()
-    if name == "hot_pixels":  # the profile keeps the log-normal, not the count of the pixels it was fitted on
+    if name in ("hot_pixels", "dead_pixels"):  # the profile keeps the shares, not the count of the pixels fitted
         want.pop("count")
     _assert_close(back, want)
     # through profile.yaml's document and back to a LoopModel

@@ -26,13 +26,25 @@ def test_base_only_adds_nothing():
     assert r.base.read_dn == pytest.approx(3.0, rel=0.04)
 
 
-@pytest.mark.parametrize("effect", ["row_noise", "column_fpn", "quantization", "black_level_offset", "channel_gain"])
+@pytest.mark.parametrize("effect", ["row_noise", "column_fpn", "quantization", "black_level_offset", "channel_gain",
+                                    "dead_pixels"])
 def test_single_effect_is_named(effect):
     r = run_case((effect,))
     assert list(r.model.effects) == [effect]
     assert r.unexplained == []
     it = [i for i in r.iterations if i["accepted"]][0]
     assert abs(it["discrepancy_after"]) < abs(it["discrepancy_before"])
+
+
+def test_dead_and_stuck_pixels_counted_beside_hot_pixels():
+    """Stuck pixels (white in every frame) are persistent dark outliers too; the defect diagnostic takes
+    them (they do not respond to light), and the dead/stuck shares are the counted ones: 64 x 64 px,
+    0.4 % dead and 0.2 % stuck drawn (binomial SE of a count of ~16 px: 25 %)."""
+    r = run_case(("dead_pixels",))
+    p = r.model.effects["dead_pixels"]
+    assert p.dead_fraction == pytest.approx(0.004, rel=0.5) and p.stuck_fraction == pytest.approx(0.002, rel=0.7)
+    assert p.stuck_value_dn == pytest.approx(1023.0 - 64.0)
+    assert "hot_pixels" not in r.model.effects
 
 
 def test_fitted_parameters_match_the_hidden_ones():

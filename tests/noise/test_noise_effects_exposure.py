@@ -80,6 +80,23 @@ def test_dead_pixels_fractions_and_values():
         assert abs(k / n - frac) < 5 * np.sqrt(frac * (1 - frac) / n)
 
 
+def test_dead_pixels_keeping_read_noise_read_black_plus_it():
+    """dead_read_noise: no photo-response, the read noise kept (Poisson-Gaussian base, beta2 = read variance):
+    the dead pixels' values over frames have mean 0 and variance beta2 (chi-square SE), the others the
+    signal's; stuck pixels stay exact."""
+    b1, b2 = 1e-3, 4e-6
+    m = comp([{"type": "dead_pixels", "dead_fraction": 0.02, "stuck_fraction": 0.01, "stuck_value": 0.9,
+               "dead_read_noise": True}], base={"type": "poisson_gaussian", "beta1": b1, "beta2": b2})
+    x = m.sample_frames(np.full((96, 96), 0.4, np.float32), cond(1.0), np.random.default_rng(2), 24)
+    fixed = m.fixed_patterns((96, 96))[0]
+    dead = x.reshape(24, -1)[:, fixed["dead"]]
+    n = dead.size
+    assert abs(dead.mean()) < 5 * np.sqrt(b2 / n)
+    assert dead.var() == pytest.approx(b2, abs=5 * b2 * np.sqrt(2 / n))
+    assert np.all(x.reshape(24, -1)[:, fixed["stuck"]] == np.float32(0.9))
+    assert x.mean() > 0.35  # the others respond
+
+
 def test_adc_dnl_code_occupancy_equals_code_widths():
     e = {"type": "adc_dnl", "range_dn": 255.0, "offset_dn": 0.0, "bits": 8, "dnl_sigma": 0.25}
     m = comp([e], base={"type": "gaussian", "sigma": 1e-12})

@@ -38,6 +38,9 @@ EFFECT_CASES = {
     "nonlinearity": [{"type": "nonlinearity", "strength": 0.3}],
     "channel_gain": [{"type": "channel_gain", "gain": [1.2, 1.0, 0.9, 0.7]}],
     "dead_pixels": [{"type": "dead_pixels", "dead_fraction": 0.02, "stuck_fraction": 0.02, "stuck_value": 0.8}],
+    # dead pixels with no photo-response behind a working read-out (what simcam loop fits): black + read noise
+    "dead_pixels_read_noise": [{"type": "dead_pixels", "dead_fraction": 0.05, "stuck_fraction": 0.02,
+                                "stuck_value": 0.8, "dead_read_noise": True}],
     "rtn": [{"type": "rtn", "fraction": 0.1, "amplitude": 0.02, "amplitude_log_sigma": 0.3, "p_high": 0.3}],
     "charge_crosstalk": [{"type": "charge_crosstalk", "coefficient": 0.08, "diagonal": 0.02}],
     "adc_dnl": [{"type": "adc_dnl", "range_dn": 200.0, "offset_dn": 16.0, "bits": 8, "dnl_sigma": 0.3}],

@@ -13,7 +13,8 @@ at its place in the signal chain, and give it an example in
 from __future__ import annotations
 
 from .. import diagnostics as _dg
-from . import (black_level_offset, channel_gain, column_fpn, dark_current, dsnu, frame_flicker, heavy_tail_read, hot_pixels,
+from . import (black_level_offset, channel_gain, column_fpn, dark_current, dead_pixels, dsnu, frame_flicker,
+               heavy_tail_read, hot_pixels,
                nonlinearity, periodic_pattern, prnu, quantization, row_noise, spatial_correlation)
 from .card import EffectCard, EffectParams, Fit, FitContext, ProfileTerm
 
@@ -36,6 +37,7 @@ CARDS: dict[str, EffectCard] = {c.name: c for c in (
     column_fpn.ColumnFpnCard(),
     dsnu.DsnuCard(),
     hot_pixels.HotPixelsCard(),
+    dead_pixels.DeadPixelsCard(),
     black_level_offset.BlackLevelOffsetCard(),
     quantization.QuantizationCard(),
 )}

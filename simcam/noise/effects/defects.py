@@ -100,6 +100,11 @@ class DeadPixels(Effect):
     dissertation, York University, 2020, ch. 2, defective pixels; EMVA 1288 R4.0 sec. 8.5, defect
     pixels). The set is drawn once per sensor.
 
+    A dead pixel has no photo-response: it reads black. With ``dead_read_noise`` its read-out chain
+    still works (a broken photodiode behind a working amplifier), so it reads black plus the read
+    noise of the frame; without, it reads exactly black (a dead read-out). A stuck pixel reads the
+    same value in every frame (a shorted node).
+
     Parameters
     ----------
     dead_fraction : float
@@ -108,12 +113,19 @@ class DeadPixels(Effect):
         Share of pixels that read ``stuck_value``.
     stuck_value : float
         Normalised raw (1.0: white, saturated).
+    dead_read_noise : bool
+        Dead pixels keep the frame's read noise (default False: exactly black).
     """
 
     type: Literal["dead_pixels"] = "dead_pixels"
     dead_fraction: float = Field(0.0, ge=0, le=1)
     stuck_fraction: float = Field(0.0, ge=0, le=1)
     stuck_value: float = 1.0
+    dead_read_noise: bool = False
+
+    @property
+    def needs_read(self) -> bool:  # the read noise is sampled apart only when dead pixels keep it
+        return bool(self.dead_read_noise and self.dead_fraction > 0)
 
     @model_validator(mode="after")
     def _sum(self):
@@ -129,6 +141,10 @@ class DeadPixels(Effect):
 
     def apply(self, x, ctx):
         flat = x.reshape(-1)
-        flat[ctx.fixed["dead"]] = np.float32(0.0)
+        dead = ctx.fixed["dead"]
+        if self.dead_read_noise and ctx.read is not None:
+            flat[dead] = ctx.read.reshape(-1)[dead]
+        else:
+            flat[dead] = np.float32(0.0)
         flat[ctx.fixed["stuck"]] = np.float32(self.stuck_value)
         return x
