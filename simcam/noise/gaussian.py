@@ -9,7 +9,6 @@ from typing import Literal
 
 import numpy as np
 from pydantic import field_validator
-from scipy.special import log_ndtr, ndtr
 
 from ..errors import NoiseModelError
 from .base import (NoiseCondition, NoiseModel, SiteParam, check_clean, check_same_shape, register_model, site_map, site_values,
@@ -60,6 +59,8 @@ class GaussianFamily(NoiseModel):
         r = (np.asarray(x, dtype=np.float64) - clean) / sd
         if upper:
             r = -r
+        from scipy.special import log_ndtr, ndtr
+
         return log_ndtr(r) if log else ndtr(r)
 
 

@@ -19,7 +19,6 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-from scipy.special import gammaln, log_ndtr, logsumexp
 
 from ..errors import NoiseModelError
 from .base import PoissonScaleModel, check_clean, check_same_shape, register_model
@@ -72,6 +71,8 @@ def _window(x, lam, scale, var):
 def _poisson_terms(lam, lo, width):
     """The counts ``k = lo, lo + 1, ...`` of each element's Poisson window (rows padded to the widest),
     which of them are inside the ``width`` of the window, and ``log Pois(k; lam)``."""
+    from scipy.special import gammaln  # imported here: 0.1 s of every process start otherwise
+
     kmax = int(width.max())
     k = lo[:, None] + np.arange(kmax)[None, :]
     valid = np.arange(kmax)[None, :] < width[:, None]
@@ -82,6 +83,8 @@ def _poisson_terms(lam, lo, width):
 
 
 def _pg_logpdf_chunk(x, lam, scale, var):
+    from scipy.special import logsumexp  # imported here: 0.1 s of every process start otherwise
+
     lo, width = _window(x, lam, scale, var)
     k, valid, logpois = _poisson_terms(lam, lo, width)
     r = x[:, None] - scale[:, None] * k
@@ -96,6 +99,8 @@ def pg_logcdf(x: np.ndarray, lam: np.ndarray, scale: np.ndarray, var: np.ndarray
     The window is the Poisson one, ``lam +- (12 sqrt(lam) + 12)`` (the Gaussian
     CDF factor is not concentrated), mass outside it below 1e-25.
     """
+    from scipy.special import log_ndtr, logsumexp  # imported here: 0.1 s of every process start otherwise
+
     out = np.empty(x.size, dtype=np.float64)
     for s in range(0, x.size, _CHUNK):
         sl = slice(s, s + _CHUNK)

@@ -58,7 +58,6 @@ from functools import lru_cache
 
 import numpy as np
 from numba import njit
-from scipy.special import erfc
 
 #: coarse grid step of the Poisson decomposition.
 A_STEP = 64
@@ -215,10 +214,20 @@ def tables_for(lam_max: float):
 
 # -- ziggurat constants ---------------------------------------------------------
 
-def _zig_edges(r: float) -> tuple[np.ndarray, float]:
-    """Edges X_0..X_256 of the layers for tail start ``r`` and the top layer's area error."""
+def _tail_area(r: float) -> float:
+    """Area under exp(-x^2/2) beyond ``r``: sqrt(pi/2) erfc(r / sqrt(2)) (``scipy.special.erfc``)."""
+    from scipy.special import erfc
+
+    return float(math.sqrt(math.pi / 2) * erfc(r / math.sqrt(2.0)))
+
+
+def _zig_edges(r: float, tail: float | None = None) -> tuple[np.ndarray, float]:
+    """Edges X_0..X_256 of the layers for tail start ``r`` and the top layer's area error.
+
+    ``tail`` is :func:`_tail_area` of ``r`` (computed when not given).
+    """
     f = lambda x: math.exp(-0.5 * x * x)  # noqa: E731
-    v = r * f(r) + math.sqrt(math.pi / 2) * erfc(r / math.sqrt(2.0))
+    v = r * f(r) + (_tail_area(r) if tail is None else tail)
     x = np.zeros(257)
     x[0], x[1] = v / f(r), r
     for i in range(1, 255):  # layer i: X_i (f(X_{i+1}) - f(X_i)) = v
@@ -235,6 +244,10 @@ def _zig_edges(r: float) -> tuple[np.ndarray, float]:
 #: (:func:`_zig_edges`), exactly the float :func:`_zig_solve` finds (a test checks it). Stated here so
 #: that importing the kernels does not import scipy.optimize (0.14 s of every process start).
 ZIG_R_ROOT = 3.654152885361009
+#: :func:`_tail_area` of :data:`ZIG_R_ROOT`, exactly as scipy computes it (a test checks it); stated so
+#: that importing the kernels does not import scipy.special either (libm's ``math.erfc`` differs from
+#: it in the last bit here, which would change every table and every noise sample).
+ZIG_TAIL_AREA = 0.0003233957646633217
 
 
 def _zig_solve() -> float:
@@ -253,7 +266,7 @@ def ziggurat_tables():
     ``w[i] = X_i / 2^52``, ``f[i] = exp(-X_i^2 / 2)``.
     """
     r = ZIG_R_ROOT
-    x, _ = _zig_edges(r)  # X_0 .. X_255, X_256 = 0
+    x, _ = _zig_edges(r, ZIG_TAIL_AREA)  # X_0 .. X_255, X_256 = 0
     k = np.floor(2.0**52 * x[1:] / x[:-1]).astype(np.uint64)
     w = x[:-1] / 2.0**52
     f = np.exp(-0.5 * x * x)

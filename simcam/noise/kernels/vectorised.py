@@ -33,7 +33,6 @@ from __future__ import annotations
 import threading
 
 import numpy as np
-from scipy.special import gammaln
 
 _F32 = np.float32
 _TWO_PI32 = np.float32(2.0 * np.pi)
@@ -285,6 +284,8 @@ def _ptrs_test_impl(lm, k, us, v, b, a) -> np.ndarray:
         a64 = -0.059 + 0.02483 * b64
         ia64 = 1.1239 + 1.1328 / (b64 - 3.4)
         lhs64 = np.log(v64 * ia64 / (a64 / (us64 * us64) + b64))
+        from scipy.special import gammaln  # imported here: 0.1 s of every process start otherwise
+
         rhs64 = -l64 + k64 * np.log(l64) - gammaln(k64 + 1.0)
         accept[idx] = lhs64 <= rhs64
     return accept

@@ -103,6 +103,12 @@ def test_ziggurat_constants():
     from simcam.noise.kernels.poisson import _zig_solve
 
     assert _zig_solve() == ZIG_R
+    # and the stated tail area is exactly scipy's sqrt(pi/2) erfc(R / sqrt(2))
+    from scipy.special import erfc
+
+    from simcam.noise.kernels.poisson import ZIG_TAIL_AREA
+
+    assert ZIG_TAIL_AREA == float(np.sqrt(np.pi / 2) * erfc(ZIG_R / np.sqrt(2.0)))
     x = ZIG_W * 2.0**52  # X_0 .. X_255
     x = np.append(x, 0.0)
     v = x[1:-1] * (ZIG_F[2:] - ZIG_F[1:-1])  # areas of layers 1..255
