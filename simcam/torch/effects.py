@@ -115,6 +115,8 @@ def hot_pixels(group: Group, x, ctx: Ctx, st: EffectState):
     """Hot pixels add their offset; with ``hot_electron`` the offset is dark charge, drawn each frame as
     ``hot_electron * Poisson(offset / hot_electron)`` (as the numpy effect); stuck and dead pixels are set."""
     add = st.fixed("add")
+    if any(e.hot_rate > 0 for e in group.uniq):  # a local dark current: offset + rate * exposure
+        add = add.double() + st.fixed("rate").double() * _exposure(st, "hot_pixels")
     if any(getattr(e, "hot_electron", None) is not None for e in group.uniq):
         el = ctx.scalar(group, lambda e: e.hot_electron or 0.0, dtype=torch.float64)
         safe = torch.where(el > 0, el, torch.ones_like(el))
@@ -373,10 +375,14 @@ def fixed_arrays(effect, fixed: dict[str, Any], shape: tuple[int, int]) -> dict[
     if effect.type == "hot_pixels":
         add = np.zeros(h * w, np.float64)
         add[fixed["hot"]] = fixed.get("hot_offset", np.float32(effect.hot_offset))
+        rate = np.zeros(h * w, np.float64)
+        if "hot_rate" in fixed:
+            rate[fixed["hot"]] = fixed["hot_rate"]
         mask = np.zeros(h * w, bool)
         val = np.zeros(h * w, np.float64)
         mask[fixed["stuck"]] = True
         val[fixed["stuck"]] = np.float32(effect.stuck_value)
         mask[fixed["dead"]] = True
-        return {"add": add.reshape(1, h, w), "set_mask": mask.reshape(1, h, w), "set_value": val.reshape(1, h, w)}
+        return {"add": add.reshape(1, h, w), "rate": rate.reshape(1, h, w), "set_mask": mask.reshape(1, h, w),
+                "set_value": val.reshape(1, h, w)}
     return {}

@@ -97,6 +97,34 @@ def test_dead_pixels_keeping_read_noise_read_black_plus_it():
     assert x.mean() > 0.35  # the others respond
 
 
+def test_hot_pixels_with_a_rate_grow_with_exposure_as_charge():
+    """hot_rate: a hot pixel is offset_i + rate_i t of dark charge (Poisson, hot_electron per electron):
+    over frames its mean is that (SE from the Poisson variance), the rates a log-normal of mean hot_rate;
+    the map and the offsets are those of the profile without rates; without an exposure time it is an
+    error."""
+    e = {"type": "hot_pixels", "hot_fraction": 0.05, "hot_offset": 0.02, "hot_log_sigma": 0.3,
+         "hot_electron": 1e-4, "hot_rate": 0.01, "hot_rate_log_sigma": 0.5}
+    m = comp([e], base={"type": "gaussian", "sigma": 1e-12})
+    no_rate = comp([{k: v for k, v in e.items() if not k.startswith("hot_rate")}], base={"type": "gaussian", "sigma": 1e-12})
+    f, f0 = m.fixed_patterns((128, 128))[0], no_rate.fixed_patterns((128, 128))[0]
+    assert np.array_equal(f["hot"], f0["hot"]) and np.array_equal(f["hot_offset"], f0["hot_offset"])
+    assert m.to_entry()["effects"][0]["hot_rate"] == 0.01
+    assert "hot_rate" not in no_rate.to_entry()["effects"][0]
+    rate = f["hot_rate"].astype(np.float64)
+    n = rate.size
+    # log-normal of mean 0.01: the sample mean within 5 SE (SE = 0.01 sqrt(exp(0.25) - 1) / sqrt(n))
+    assert rate.mean() == pytest.approx(0.01, abs=5 * 0.01 * np.sqrt(np.expm1(0.25) / n))
+    for t in (0.5, 4.0):
+        x = m.sample_frames(np.zeros((128, 128), np.float32), cond(t), np.random.default_rng(3), 16)
+        hot = x.reshape(16, -1)[:, f["hot"]].astype(np.float64)
+        expect = f["hot_offset"].astype(np.float64) + rate * np.float32(t)
+        # Poisson charge: variance hot_electron * expect per value, 16 frames per pixel, summed over pixels
+        se = np.sqrt(np.sum(1e-4 * expect) / 16) / n
+        assert hot.mean() == pytest.approx(expect.mean(), abs=5 * se + 1e-6)
+    with pytest.raises(NoiseModelError, match="exposure"):
+        m.sample_frames(np.zeros((32, 32), np.float32), NoiseCondition(cfa="RGGB"), np.random.default_rng(0), 1)
+
+
 def test_adc_dnl_code_occupancy_equals_code_widths():
     e = {"type": "adc_dnl", "range_dn": 255.0, "offset_dn": 0.0, "bits": 8, "dnl_sigma": 0.25}
     m = comp([e], base={"type": "gaussian", "sigma": 1e-12})

@@ -26,6 +26,10 @@ EFFECT_CASES = {
                     "stuck_fraction": 0.01, "stuck_value": 0.9, "dead_fraction": 0.01}],
     # hot pixels as dark charge (what simcam loop writes when their temporal variance shows shot noise)
     "hot_pixels_charge": [{"type": "hot_pixels", "hot_fraction": 0.3, "hot_offset": 0.05, "hot_electron": 0.01}],
+    # hot pixels as a local dark current: offset + rate x exposure, Poisson charge (simcam loop with darks at
+    # two exposure times)
+    "hot_pixels_rate": [{"type": "hot_pixels", "hot_fraction": 0.3, "hot_offset": 0.02, "hot_log_sigma": 0.3,
+                         "hot_electron": 0.01, "hot_rate": 0.05, "hot_rate_log_sigma": 0.5}],
     "heavy_tail_read": [{"type": "heavy_tail_read", "lam": -0.2, "scale": 0.002}],
     "quantization": [{"type": "quantization", "range_dn": 200.0, "step_dn": 2.0, "offset_dn": 16.3}],
     "spatial_correlation": [{"type": "heavy_tail_read", "lam": 0.0, "scale": 0.002},

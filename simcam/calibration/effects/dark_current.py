@@ -18,8 +18,9 @@ and of the temporal variance against exposure time (:func:`simcam.calibration.da
 ``rate_e_per_s`` = mean slope / K (K from the variance slope / mean slope when the capture gives
 none), the mean slope over the pixels' least-squares slopes less those beyond 10 robust sigma above
 the median (hot pixels whose charge also grows with the exposure), ``log_sigma`` from the robust
-spread of the per-pixel slopes (row and column profiles removed, temporal noise of the slope taken
-off; a log-normal's robust spread, so a slight underestimate for wide spreads). ``read_exposure_s`` is the shortest exposure time:
+spread of the per-pixel slopes (row and column profiles removed), the log-normal whose robust spread,
+with the temporal noise the slopes carry, is the measured one
+(:func:`simcam.calibration.dark_current.lognormal_log_sigma`). ``read_exposure_s`` is the shortest exposure time:
 the read noise is the dark variance there less the dark current's shot noise.
 
 Profile. ``{type: dark_current, rate, dcnu_log_sigma, electron}``: rate in e-/s, the log-normal

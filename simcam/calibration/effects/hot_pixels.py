@@ -26,11 +26,21 @@ when the detected pixels' temporal variance in the darks exceeds the others' by 
 what Poisson charge would add (summed over the hot pixels), off (a fixed offset, e.g. an ADC or
 clamp defect) otherwise; it needs a measured K.
 
+A hot pixel is a local dark current, so its signal grows with the exposure time (EMVA 1288 Release
+4.0, sec. 8.5: defect pixels show in the dark image at long exposures). With darks at two exposure
+times or more, each detected pixel's signal (temporal mean, profiles removed) is fitted by least
+squares as ``offset_i + rate_i t``; when the rates' mean is above 4 standard errors of their noise
+the card keeps a log-normal of the rates (``rate_dn_per_s``, its mean, and ``rate_log_sigma``, both
+by the moments of the rates, their noise variance taken off) and the offsets become the intercepts at
+t = 0 (same moments). Otherwise, and at one exposure time, the offset is the signal in the pooled
+dark mean map as above.
+
 Profile. ``{type: hot_pixels, hot_fraction, hot_offset, hot_log_sigma}``: the same log-normal, as
 its mean ``hot_offset = exp(log_mean + log_sigma^2 / 2) / (white - black)`` on normalised raw and
 ``hot_log_sigma = log_sigma``; reading it back inverts this exactly (the count is not kept). With
 ``shot_noise`` also ``hot_electron = K / (white - black)``: the noise stage then draws the offset as
-Poisson electrons each frame.
+Poisson electrons each frame. With rates also ``hot_rate = rate_dn_per_s / (white - black)`` and
+``hot_rate_log_sigma``: the noise stage adds ``rate_i t`` with each frame's exposure time.
 """
 
 from __future__ import annotations
@@ -50,6 +60,10 @@ class HotPixels(EffectParams):
                                        scale=None, default=None)
     gain_dn_per_e: float | None = quantity("DN/e-", "system gain the shot noise is drawn with (with shot_noise)",
                                            default=None)
+    rate_dn_per_s: float | None = quantity("DN/s", "mean growth of a hot pixel's signal per second of exposure "
+                                           "(None: no exposure dependence)", default=None)
+    rate_log_sigma: float | None = quantity("ln", "standard deviation of the natural log of a hot pixel's rate",
+                                            default=None)
 
 
 class HotPixelsCard(EffectCard, name="hot_pixels", params=HotPixels, null_field="fraction", diagnostics=("hot_pixel_tail",),
@@ -62,9 +76,14 @@ class HotPixelsCard(EffectCard, name="hot_pixels", params=HotPixels, null_field=
         logs = np.log(np.maximum(vals, 1e-3))
         K = float(getattr(model, "K", 0.0) or 0.0)
         shot = _shot_noise(d, hot, vals, K)
-        return HotPixels(fraction=float(hot.mean()), log_mean=float(logs.mean()),
-                         log_sigma=float(max(logs.std(), 0.05)), count=int(hot.sum()),
-                         shot_noise=True if shot else None, gain_dn_per_e=K if shot else None)
+        log_mean, log_sigma = float(logs.mean()), float(max(logs.std(), 0.05))
+        rate = rate_ls = None
+        lines = _offset_and_rate(d, hot)
+        if lines is not None:  # a local dark current: intercept + rate x exposure
+            (log_mean, log_sigma), (rate, rate_ls) = lines
+        return HotPixels(fraction=float(hot.mean()), log_mean=log_mean, log_sigma=log_sigma, count=int(hot.sum()),
+                         shot_noise=True if shot else None, gain_dn_per_e=K if shot else None,
+                         rate_dn_per_s=rate, rate_log_sigma=rate_ls)
 
     def to_profile(self, p, model):
         mean = float(np.exp(p.log_mean + p.log_sigma ** 2 / 2))
@@ -72,6 +91,9 @@ class HotPixelsCard(EffectCard, name="hot_pixels", params=HotPixels, null_field=
                  "hot_offset": mean / model.full_scale_dn, "hot_log_sigma": float(p.log_sigma)}
         if p.shot_noise and p.gain_dn_per_e:
             entry["hot_electron"] = float(p.gain_dn_per_e) / model.full_scale_dn
+        if p.rate_dn_per_s:
+            entry["hot_rate"] = float(p.rate_dn_per_s) / model.full_scale_dn
+            entry["hot_rate_log_sigma"] = float(p.rate_log_sigma or 0.0)
         return ProfileTerm(effect=entry)
 
     def from_profile(self, entry, full_scale_dn):
@@ -80,7 +102,52 @@ class HotPixelsCard(EffectCard, name="hot_pixels", params=HotPixels, null_field=
         return HotPixels(fraction=float(entry.get("hot_fraction", 0.0)),
                          log_mean=float(np.log(max(entry.get("hot_offset", 0.05) * full_scale_dn, 1e-6)) - ls * ls / 2),
                          log_sigma=ls, shot_noise=True if e else None,
-                         gain_dn_per_e=float(e) * full_scale_dn if e else None)
+                         gain_dn_per_e=float(e) * full_scale_dn if e else None,
+                         rate_dn_per_s=float(entry["hot_rate"]) * full_scale_dn if entry.get("hot_rate") else None,
+                         rate_log_sigma=float(entry.get("hot_rate_log_sigma", 0.0)) if entry.get("hot_rate") else None)
+
+
+def _lognormal_moments(x: np.ndarray, noise_var: float) -> tuple[float, float] | None:
+    """(log mean, log sigma) of the log-normal with the mean of ``x`` and its variance less ``noise_var``."""
+    mean = float(x.mean())
+    if mean <= 0:
+        return None
+    cv2 = max(float(x.var(ddof=1)) - noise_var, 0.0) / (mean * mean) if x.size > 1 else 0.0
+    ls = float(max(np.sqrt(np.log1p(cv2)), 0.05))
+    return float(np.log(mean) - ls * ls / 2), ls
+
+
+def _offset_and_rate(d, hot: np.ndarray):
+    """``((offset log mean, log sigma), (rate DN/s, rate log sigma))`` of the hot pixels from darks at two
+    exposure times or more (module docstring), or None (one exposure time, no significant rate, or an
+    intercept that is not positive)."""
+    by_t: dict[float, list] = {}
+    for t, f in d.dark_series or []:
+        by_t.setdefault(float(t), []).append(f)
+    if len(by_t) < 2 or not hot.any():
+        return None
+    times = np.array(sorted(by_t))
+    sig, noise = [], []
+    for t in times:
+        stacks = [f.astype(np.float64) for f in by_t[t]]
+        n = sum(s.shape[0] for s in stacks)
+        mean = sum(s.sum(0) for s in stacks) / n
+        sig.append(dg.remove_profiles(mean)[hot])
+        var = [np.var(s, axis=0, ddof=1)[hot] for s in stacks if s.shape[0] >= 2]
+        noise.append(np.mean(var, axis=0) / n if var else np.zeros(int(hot.sum())))
+    c = (times - times.mean()) / np.sum((times - times.mean()) ** 2)  # least-squares slope weights
+    slope = sum(ci * s for ci, s in zip(c, sig))
+    slope_var = sum(ci * ci * v for ci, v in zip(c, noise))
+    k = slope.size
+    if slope.mean() <= 4.0 * np.sqrt(slope_var.sum()) / k:
+        return None
+    icpt = sum(s for s in sig) / times.size - slope * times.mean()
+    icpt_var = sum((1.0 / times.size - ci * times.mean()) ** 2 * v for ci, v in zip(c, noise))
+    off = _lognormal_moments(icpt, float(icpt_var.mean()))
+    rate = _lognormal_moments(slope, float(slope_var.mean()))
+    if off is None or rate is None:
+        return None
+    return off, (float(slope.mean()), rate[1])
 
 
 def _shot_noise(d, hot: np.ndarray, offsets: np.ndarray, K: float) -> bool:

@@ -40,6 +40,15 @@ class HotPixels(Effect):
         mean, plus its shot noise, as dark electrons carry: EMVA 1288 R4.0 sec. 4.2; A. Abdelhamed,
         *Noise Modelling for Smartphone Cameras*, PhD dissertation, York University, 2020, ch. 2).
         None (default): a fixed offset, no temporal noise of its own.
+    hot_rate : float
+        Mean extra dark signal per second of exposure of a hot pixel (normalised raw / s, >= 0): a hot
+        pixel is a local dark current, so its signal grows with the exposure time t, ``offset_i +
+        rate_i t`` (EMVA 1288 R4.0 sec. 4.2 and 8.5: defect pixels are seen in the dark image at long
+        exposures). 0 (default): the offset alone, no exposure time needed. Otherwise the noise stage
+        needs the frame's exposure time, as for ``dark_current``.
+    hot_rate_log_sigma : float
+        Spread of the rates over the hot pixels, as ``hot_log_sigma`` for the offsets (a log-normal of
+        mean ``hot_rate``), drawn independently of the offsets.
     """
 
     type: Literal["hot_pixels"] = "hot_pixels"
@@ -50,6 +59,8 @@ class HotPixels(Effect):
     stuck_fraction: float = Field(0.0, ge=0, le=1)
     stuck_value: float = 1.0
     dead_fraction: float = Field(0.0, ge=0, le=1)
+    hot_rate: float = Field(0.0, ge=0)
+    hot_rate_log_sigma: float = Field(0.0, ge=0)
 
     @model_validator(mode="after")
     def _sum(self):
@@ -61,6 +72,9 @@ class HotPixels(Effect):
         out = super().to_entry()
         if self.hot_electron is None:  # off: the entry as before the option existed
             out.pop("hot_electron")
+        if self.hot_rate == 0:  # no exposure dependence: the entry as before the option existed
+            out.pop("hot_rate")
+            out.pop("hot_rate_log_sigma")
         return out
 
     def fixed(self, shape, rng):
@@ -75,11 +89,19 @@ class HotPixels(Effect):
             s = float(self.hot_log_sigma)
             n = rng.standard_normal(hot_idx.size)
             out["hot_offset"] = (self.hot_offset * np.exp(s * n - s * s / 2)).astype(np.float32)
+        if self.hot_rate > 0:  # drawn last: the map and offsets are those of the same profile without rates
+            s = float(self.hot_rate_log_sigma)
+            n = rng.standard_normal(hot_idx.size)
+            out["hot_rate"] = (self.hot_rate * np.exp(s * n - s * s / 2)).astype(np.float32)
         return out
 
     def apply(self, x, ctx):
         flat = x.reshape(-1)
         off = ctx.fixed.get("hot_offset", np.float32(self.hot_offset))
+        if self.hot_rate > 0:
+            from .dark import exposure_of
+
+            off = (off + ctx.fixed["hot_rate"] * np.float32(exposure_of(ctx, self.type))).astype(np.float32)
         if self.hot_electron is None:
             flat[ctx.fixed["hot"]] += off
         elif ctx.fixed["hot"].size:  # dark charge: Poisson electrons, one draw per frame (whole frame, block 0)
