@@ -55,7 +55,13 @@ def _spread(x: np.ndarray) -> tuple[float, float]:
 
 
 def sequence_stats(frames: np.ndarray) -> dict[str, tuple[float, float]]:
-    """``{name: (value, standard error)}`` for one sequence of frames (n, H, W) in DN."""
+    """``{name: (value, standard error)}`` for one sequence of frames (n, H, W) in DN.
+
+    The standard errors are closed forms over pixels, rows, columns or frames (module docstring):
+    right where those are independent draws. A pattern with one random phase per frame for the
+    whole sensor (a periodic pattern) makes every column of a frame move together, which they do
+    not count (there the spread of the column means varies from capture to capture far more).
+    """
     f = np.asarray(frames, dtype=np.float64)
     n, h, w = f.shape
     out: dict[str, tuple[float, float]] = {}
@@ -76,8 +82,11 @@ def sequence_stats(frames: np.ndarray) -> dict[str, tuple[float, float]]:
     out["pixel_spread"] = _spread(resid)
     # outliers of the mean map (EMVA 1288 R4.0 sec. 8.5: defect pixels from the logarithmic
     # histogram of the mean image): the share beyond 8 robust sigma, and how far they lie
-    rc = resid - np.median(resid)
-    big = np.abs(rc) > 8.0 * max(_robust_sigma(resid), 1e-12)
+    # median profiles: a pixel stuck at white would lift its row and column means and make outliers of them
+    rc = m - np.median(m, axis=1, keepdims=True)
+    rc = rc - np.median(rc, axis=0, keepdims=True)
+    rc = rc - np.median(rc)
+    big = np.abs(rc) > 8.0 * max(_robust_sigma(rc), 1e-12)
     k = int(big.sum())
     out["outlier_fraction"] = (k / rc.size, float(np.sqrt(max(k, 1)) / rc.size))
     if k >= 5:

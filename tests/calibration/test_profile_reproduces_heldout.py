@@ -33,6 +33,9 @@ CASES = {
     "dark_current_prnu": {"dark_current": {"rate_e_per_s": 8.0, "spread": 0.4}, "prnu": {"sigma_rel": 0.01}},
     "hot_pixels_growing_heavy_tail": {"hot_pixels": {"fraction": 0.002, "offset_e": 60.0, "rate_e_per_s": 30.0},
                                       "heavy_tail_read": {"nu": 4.0}},
+    "quantization_black_offset": {"quantization": {"step_dn": 4.0}, "black_level_offset": {"offset_dn": 3.0}},
+    "dead_stuck_column": {"dead_pixels": {"fraction": 0.003}, "stuck_pixels": {"fraction": 0.002, "white_share": 0.5},
+                          "column_fpn": {"sigma_dn": 2.0}},
 }
 #: combined standard errors a statistic may differ by (14 statistics x 4 sequences per case)
 Z_MAX = 5.0
@@ -62,9 +65,9 @@ def _synthesised(profile, sp: SensorSpec, clean_dn: np.ndarray, t: float, n: int
 
 
 def _site_means(x: np.ndarray) -> np.ndarray:
-    """The 2x2-site means of an image, tiled back to its shape."""
+    """The 2x2-site medians of an image (the level of a site's pixels, defects aside), tiled back to its shape."""
     h, w = x.shape
-    cell = np.array([[x[dy::2, dx::2].mean() for dx in (0, 1)] for dy in (0, 1)])
+    cell = np.array([[np.median(x[dy::2, dx::2]) for dx in (0, 1)] for dy in (0, 1)])
     return np.tile(cell, (h // 2, w // 2))
 
 
