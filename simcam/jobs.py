@@ -225,3 +225,13 @@ def bench_job(payload: dict):
                            metas=None if meta is None else [meta], renderer=renderer,
                            cfa=None if meta is not None else payload.get("cfa"))
     return {"result": result}
+
+
+# What a batch worker starts with imported (simcam.batch: the fork server imports them once for
+# every local worker): the modules each job imports when it runs.
+render_job.preload = ("simcam.io.dng", "simcam.io.images", "simcam.pipeline", "simcam.render_samples")
+synth_patches_job.preload = ("zarr", "simcam.synth", "simcam.profiles.schema", "simcam.stages.noise",
+                             "simcam.training.crops")
+ground_truth_job.preload = ("simcam.groundtruth", "simcam.io.atomic")
+loop_job.preload = ("simcam.calibration.loop", "simcam.calibration.report")
+bench_job.preload = ("simcam.denoise.benchmark",)

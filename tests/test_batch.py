@@ -160,12 +160,17 @@ def test_local_cluster_workers_run_with_one_thread_and_glibc_malloc_defaults():
     from simcam.parallel import threads
 
     def environment(names):  # pickled by value (a local function) to the workers
-        return {"env": {n: os.environ.get(n) for n in names}, "threads": threads()}
+        import numba  # imported by the fork server: it read NUMBA_NUM_THREADS there
+
+        return {"env": {n: os.environ.get(n) for n in names}, "threads": threads(),
+                "numba": numba.config.NUMBA_NUM_THREADS}
+
+    environment.preload = ("numba", "numpy")
 
     names = [*THREAD_VARIABLES, "MALLOC_TRIM_THRESHOLD_"]
     out = run_batch(environment, [Task("a", names)], BatchConfig(workers=1, progress=False), echo=lambda s: None)
     assert out[0].ok, out[0].error
     env = out[0].info["env"]
     assert {n: env[n] for n in THREAD_VARIABLES} == {n: "1" for n in THREAD_VARIABLES}
-    assert out[0].info["threads"] == 1
+    assert out[0].info["threads"] == 1 and out[0].info["numba"] == 1
     assert env["MALLOC_TRIM_THRESHOLD_"] is None or "MALLOC_TRIM_THRESHOLD_" in os.environ
