@@ -6,7 +6,9 @@ Three jobs, each run five ways in the same process tree, one after the other:
   ``simcam.jobs``, no batch layer);
 * ``Pool(1)`` / ``Pool(2)``: ``multiprocessing.Pool.map`` over the same items;
 * ``dask 1`` / ``dask 2``: ``simcam.batch.run_batch`` on a LocalCluster of 1 / 2 worker
-  processes (one thread each: simcam's row bands, numba, BLAS and OpenMP limited to one thread).
+  processes (one thread each: simcam's row bands, numba, BLAS and OpenMP limited to one thread),
+  each in a fresh process as a command runs it (its wall time: run_batch from the cluster's start
+  to its close, the fork server's start and imports included).
 
 Jobs: ``render`` (N renders of a synthetic 12 MP DNG -> 8-bit PNG, pipeline srgb), ``synth``
 (a training set of P noisy/clean patches, packed 4 x 32 x 32, from 1 MP clean DNGs, into Zarr),
@@ -27,10 +29,13 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import json
 import multiprocessing
 import os
+import pickle
 import platform
 import shutil
+import subprocess
 import sys
 import tempfile
 import time
@@ -43,7 +48,7 @@ if __package__ in (None, ""):  # run as a script: make the repository importable
 from machine import cpu_model  # noqa: E402
 from render import write_synthetic_dng  # noqa: E402  (benchmarks/render.py)
 
-from simcam.batch import BatchConfig, Task, run_batch  # noqa: E402
+from simcam.batch import Task  # noqa: E402
 from simcam.jobs import ground_truth_job, render_job, synth_patches_job  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
@@ -71,14 +76,35 @@ def run_config(name: str, job, tasks: list[Task]) -> tuple[float, float, float]:
         n = int(name[5])
         with multiprocessing.get_context("fork").Pool(n, initializer=_one_thread) as pool:
             res = pool.map(_call, [(job, t) for t in tasks], chunksize=1)
-    else:
+    else:  # in a fresh process, as a command would run it: each configuration starts its own fork server
         n = int(name.split()[1])
-        out = run_batch(job, tasks, BatchConfig(workers=n, progress=False), label=name, echo=lambda s: None)
-        bad = [o for o in out if not o.ok]
-        if bad:
-            raise RuntimeError(f"{name}: {bad[0].key}: {bad[0].error}")
-        res = [(o.seconds, o.info.get("peak_rss_mib", 0.0)) for o in out]
+        with tempfile.TemporaryDirectory() as tmp:
+            spec = Path(tmp) / "batch.pkl"
+            spec.write_bytes(pickle.dumps((job.__module__, job.__name__, tasks, n, name)))
+            proc = subprocess.run([sys.executable, "-c", _DASK_RUN, str(spec)], capture_output=True, text=True,
+                                  cwd=str(REPO))
+            if proc.returncode != 0:
+                raise RuntimeError(f"{name}: {proc.stderr.strip()[-2000:]}")
+            wall, res = json.loads(proc.stdout.strip().splitlines()[-1])
+        return wall, max(r[1] for r in res), sum(r[0] for r in res)
     return time.perf_counter() - t0, max(r[1] for r in res), sum(r[0] for r in res)
+
+
+#: one dask configuration in a fresh process: the wall time of run_batch (cluster start to close)
+_DASK_RUN = """
+import importlib, json, pickle, sys, time
+from pathlib import Path
+from simcam.batch import BatchConfig, run_batch
+mod, fn, tasks, n, name = pickle.loads(Path(sys.argv[1]).read_bytes())
+job = getattr(importlib.import_module(mod), fn)
+t0 = time.perf_counter()
+out = run_batch(job, tasks, BatchConfig(workers=n, progress=False), label=name, echo=lambda s: None)
+wall = time.perf_counter() - t0
+bad = [o for o in out if not o.ok]
+if bad:
+    sys.exit(f"{bad[0].key}: {bad[0].error}")
+print(json.dumps([wall, [(o.seconds, o.info.get("peak_rss_mib", 0.0)) for o in out]]))
+"""
 
 
 def _one_thread():
