@@ -27,6 +27,10 @@ seed eq. 3.6 for the Poisson-Gaussian core)::
 * ``dark_rate`` (``dark_current``) log-normal per pixel (mean ``rate_e_per_s``, log-spread
   ``log_sigma``), drawn once per sensor; with it, :func:`capture_set` adds a second dark at 1 s.
 * ``flicker`` N(0, s^2) per frame, only where there is light (``frame_flicker``).
+* ``rtn``: a set of pixels (``fraction``, drawn once per sensor, after the other patterns) with steps
+  log-normal about ``amplitude_dn`` (spread ``log_sigma``), added to ``x`` in the frames where the
+  pixel's trap is in its high state (probability ``p_high``, independently per frame): random
+  telegraph noise.
 * ``column_noise`` N(0, s^2) per frame and column: deliberately *outside* simcam's effect
   vocabulary (temporal column noise), to test that the loop reports it as unexplained.
 * ``checker_offset`` N(0, s^2) per frame, added with opposite signs to the 00/11 and the 01/10
