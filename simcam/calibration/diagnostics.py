@@ -28,6 +28,9 @@ dsnu_excess             dsnu                robust var of the dark mean map (row
                                             (temporal var / n)
 hot_pixel_tail          hot_pixels          fraction of pixels whose dark temporal median is
                                             > 6 robust sigma (persistent outliers)
+telegraph_pixels        rtn                 fraction of pixels whose dark frames sit on two levels
+                                            >= 5 read-noise sigma apart, each as tight as the read
+                                            noise (>= 2 frames on each: switching)
 prnu_excess             prnu                per plane (even/odd flat-map covariance - same of the
                                             darks) / signal^2, mean over planes
 black_offset            black_level_offset  median of dark mean map - declared black (DN)
@@ -64,6 +67,7 @@ DIAGNOSTICS = (
     "col_temporal_excess", "dark_checker_jitter", "col_fpn_excess", "dsnu_excess", "hot_pixel_tail", "prnu_excess",
     "black_offset", "dark_signal_slope", "frame_mean_jitter", "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "lag1_corr",
     "lag2_corr", "defect_pixels",
+    "telegraph_pixels",
 )
 
 #: When the diagnostic on the left is chosen but one on the right is also
@@ -77,15 +81,15 @@ PRECEDENCE = {
     "dsnu_excess": ("hot_pixel_tail", "defect_pixels"),
     "col_fpn_excess": ("hot_pixel_tail", "dsnu_excess", "defect_pixels"),  # per-pixel fixed offsets leak into column means
     # a pixel stuck at a high code is also a persistent dark outlier; it does not respond to light
-    "hot_pixel_tail": ("defect_pixels",),
+    "hot_pixel_tail": ("defect_pixels", "telegraph_pixels"),
     # a dark current is the one symptom at every exposure time; at the shortest one it lifts the dark level
     "black_offset": ("dark_signal_slope", "hot_pixel_tail", "col_fpn_excess", "dsnu_excess"),
     "frame_mean_jitter": ("row_spectrum_peak", "row_mean_excess", "col_spectrum_peak"),
     "plane_gain_spread": ("ptc_curvature",),
     # hot pixels whose offset is charge carry its shot noise: a temporal tail of their own, which their
     # persistent offset (the more specific symptom) explains
-    "dark_tail_mass": ("code_occupancy", "hot_pixel_tail"),
-    "dark_ppcc_lambda": ("code_occupancy", "hot_pixel_tail"),
+    "dark_tail_mass": ("code_occupancy", "hot_pixel_tail", "telegraph_pixels"),
+    "dark_ppcc_lambda": ("code_occupancy", "hot_pixel_tail", "telegraph_pixels"),
     "lag1_corr": ("code_occupancy",),
     "lag2_corr": ("code_occupancy", "lag1_corr"),
 }
@@ -125,6 +129,7 @@ NEEDS = {
     "lag1_corr": "needs a dark sequence",
     "lag2_corr": "needs a dark sequence",
     "defect_pixels": "needs a flat sequence (and darks or a declared black level)",
+    "telegraph_pixels": "needs a dark sequence",
 }
 
 
@@ -446,8 +451,10 @@ def hot_pixel_mask(d: CaptureData) -> np.ndarray | None:
     """Persistent dark outliers: pixels beyond 6 robust sigma of the dark temporal-*mean* map in
     both that map and the temporal-*median* map (row/column profiles removed). A hot pixel is high
     in every frame; a heavy-tailed read-noise outlier lifts one frame, which moves the mean but
-    not the median. (The threshold comes from the mean map: the median of a few coarsely
-    quantised frames sits on so few codes that its own robust spread can collapse to 0.)"""
+    not the median. A pixel whose dark frames sit on two tight levels (a telegraph pixel,
+    :func:`telegraph_split`, even one on its low level in one frame only) is not a hot one.
+    (The threshold comes from the mean map: the median of a few coarsely quantised frames sits on so
+    few codes that its own robust spread can collapse to 0.)"""
     if "hotmask" not in d.cache:
         dm = d.dark_map()
         if dm is None:
@@ -456,7 +463,7 @@ def hot_pixel_mask(d: CaptureData) -> np.ndarray | None:
             r_mean = remove_profiles(dm[0])
             thr = 6 * robust_sigma(r_mean)
             r_med = remove_profiles(np.median(np.concatenate(d.darks).astype(np.float64), axis=0))
-            d.cache["hotmask"] = (r_mean > thr) & (r_med > thr)
+            d.cache["hotmask"] = (r_mean > thr) & (r_med > thr) & ~_telegraph_mask(d)
     return d.cache["hotmask"]
 
 
@@ -508,6 +515,86 @@ def defect_pixels(d: CaptureData):
     """Share of the pixels that are dead or stuck (:func:`defect_masks`)."""
     m = defect_masks(d)
     return None if m is None else float(np.mean(m[0] | m[1]))
+
+
+#: a random-telegraph pixel's two levels are at least this many read-noise sigma apart ...
+RTN_GAP_SIGMA = 5.0
+#: ... and each is about as tight as the read noise: pooled within-level variance <= this x the read variance
+RTN_LEVEL_VAR = 2.0
+#: the looser (gap, level variance) of a pixel that is not taken for a hot pixel (:func:`hot_pixel_mask`):
+#: a telegraph pixel high in most frames looks hot, one whose step the read noise has blurred too
+RTN_HOT_EXCLUDE = (4.0, 3.0)
+
+
+def two_level_split(v: np.ndarray, sigma2: float, min_level: int = 2, gap_sigma: float = RTN_GAP_SIGMA,
+                    level_var: float = RTN_LEVEL_VAR) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per column of ``v`` (the n values of one pixel over frames, n >= 2 ``min_level``): the split of its
+    sorted values into a low and a high level of >= ``min_level`` values each with the least
+    within-level sum of squares (1-D 2-means), as (two-level mask, gap between the level means,
+    number of values on the high level).
+    Two-level: the gap is >= ``gap_sigma`` x sqrt(``sigma2``) and the pooled within-level variance
+    <= ``level_var`` x ``sigma2`` (a pixel with a wide unimodal spread, such as a hot
+    pixel's dark-charge shot noise, has a gap too, but wide levels; one heavy-tailed outlier is one frame)."""
+    n = v.shape[0]
+    s = np.sort(v, axis=0)
+    cs, cs2 = np.cumsum(s, 0), np.cumsum(s * s, 0)
+    tot, tot2 = cs[-1], cs2[-1]
+    best_w = np.full(v.shape[1:], np.inf)
+    gap = np.zeros(v.shape[1:])
+    high = np.zeros(v.shape[1:], np.int64)
+    for k in range(min_level, n - min_level + 1):  # k values on the low level, n - k on the high one
+        a, a2 = cs[k - 1], cs2[k - 1]
+        b, b2 = tot - a, tot2 - a2
+        w = (a2 - a * a / k) + (b2 - b * b / (n - k))
+        better = w < best_w
+        best_w = np.where(better, w, best_w)
+        gap = np.where(better, b / (n - k) - a / k, gap)
+        high = np.where(better, n - k, high)
+    mask = (gap >= gap_sigma * np.sqrt(sigma2)) & (best_w / max(n - 2, 1) <= level_var * sigma2)
+    return mask, gap, high
+
+
+def telegraph_split(d: CaptureData) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float] | None:
+    """Random-telegraph pixels of the darks (:func:`two_level_split` on all dark frames, each frame's row
+    and column means removed; sigma^2 the 1 %-trimmed mean of the per-pixel temporal variances, i.e. the
+    read noise): (two-level mask, gap map (DN), high-level count map, frame count, sigma^2, mask of the
+    pixels that are two-level with one frame on a level allowed and :data:`RTN_HOT_EXCLUDE`'s bounds)."""
+    if "telegraph" not in d.cache:
+        if not d.darks:
+            d.cache["telegraph"] = None
+            return None
+        x = np.concatenate(d.darks).astype(np.float64)
+        n = x.shape[0]
+        if n < 4:
+            raise NotApplicable("fewer than 4 dark frames: two levels of >= 2 frames each are not told apart")
+        x -= x.mean(axis=2, keepdims=True)
+        x -= x.mean(axis=1, keepdims=True)
+        v = x.reshape(n, -1)
+        s2 = float(sst.trim_mean(np.var(v, axis=0, ddof=1), 0.01))
+        if not s2 > 0:
+            raise NotApplicable("the dark frames' temporal variance is 0 (constant or quantisation-dominated darks)")
+        mask, gap, high = two_level_split(v, s2)
+        shape = x.shape[1:]
+        loose = two_level_split(v, s2, 1, *RTN_HOT_EXCLUDE)[0]
+        d.cache["telegraph"] = (mask.reshape(shape), gap.reshape(shape), high.reshape(shape), n, s2,
+                                loose.reshape(shape))
+    return d.cache["telegraph"]
+
+
+def _telegraph_mask(d: CaptureData) -> np.ndarray | bool:
+    """The pixels of :func:`telegraph_split` that are two-level with one frame on a level allowed (a
+    telegraph pixel low in only one frame is not a hot pixel), or False where it is not defined."""
+    try:
+        t = telegraph_split(d)
+    except NotApplicable:
+        return False
+    return False if t is None else t[5]
+
+
+def telegraph_pixels(d: CaptureData):
+    """Share of the pixels whose dark frames sit on two levels (:func:`telegraph_split`)."""
+    t = telegraph_split(d)
+    return None if t is None else float(np.mean(t[0]))
 
 
 def hot_pixel_tail(d: CaptureData):
@@ -725,6 +812,9 @@ def resolution(name: str, d: CaptureData) -> float:
     if name == "defect_pixels":  # one pixel
         fm = d.flat_map()
         return 1.0 / fm[0].size if fm is not None else 0.0
+    if name == "telegraph_pixels":  # one pixel
+        dm = d.dark_map()
+        return 1.0 / dm[0].size if dm is not None else 0.0
     if name == "dark_tail_mass":
         x = dark_residual_sample(d)
         return 1.0 / x.size if x is not None else 0.0

@@ -27,6 +27,10 @@ seed eq. 3.6 for the Poisson-Gaussian core)::
 * ``dark_rate`` (``dark_current``) log-normal per pixel (mean ``rate_e_per_s``, log-spread
   ``log_sigma``), drawn once per sensor; with it, :func:`capture_set` adds a second dark at 1 s.
 * ``flicker`` N(0, s^2) per frame, only where there is light (``frame_flicker``).
+* ``rtn``: a set of pixels (``fraction``, drawn once per sensor, after the other patterns) with steps
+  log-normal about ``amplitude_dn`` (spread ``log_sigma``), added to ``x`` in the frames where the
+  pixel's trap is in its high state (probability ``p_high``, independently per frame): random
+  telegraph noise.
 * ``column_noise`` N(0, s^2) per frame and column: deliberately *outside* simcam's effect
   vocabulary (temporal column noise), to test that the loop reports it as unexplained.
 * ``checker_offset`` N(0, s^2) per frame, added with opposite signs to the 00/11 and the 01/10
@@ -45,6 +49,7 @@ EFFECTS = (
     "row_noise", "column_fpn", "dsnu", "prnu", "hot_pixels", "heavy_tail_read", "quantization",
     "spatial_correlation", "periodic_pattern", "black_level_offset", "frame_flicker",
     "nonlinearity", "channel_gain", "dark_current", "dead_pixels",
+    "rtn",
 )
 
 #: Parameters the tests use for each effect alone (chosen well above the
@@ -65,6 +70,7 @@ DEFAULT_EFFECTS = {
     "channel_gain": {"gains": [1.15, 1.0, 1.0, 0.85]},
     "dark_current": {"rate_e_per_s": 40.0, "log_sigma": 0.3},
     "dead_pixels": {"dead_fraction": 0.004, "stuck_fraction": 0.002},
+    "rtn": {"fraction": 0.015, "amplitude_dn": 20.0, "log_sigma": 0.3, "p_high": 0.4},
 }
 
 
@@ -153,6 +159,12 @@ class HiddenEffectSensor:
             u = rng.random((h, w))
             self.dead = u < p["dead_fraction"]  # no photo-response: black + read noise
             self.stuck = (u >= p["dead_fraction"]) & (u < p["dead_fraction"] + p["stuck_fraction"])  # white
+        self.rtn_idx = self.rtn_amp = None
+        if "rtn" in eff:  # drawn after the others: their patterns are those of a sensor without
+            p = eff["rtn"]
+            self.rtn_idx = np.flatnonzero(rng.random((h, w)) < p["fraction"])
+            s = p.get("log_sigma", 0.0)
+            self.rtn_amp = p["amplitude_dn"] * np.exp(s * rng.standard_normal(self.rtn_idx.size) - s * s / 2)
 
     def frames(self, mu_e: np.ndarray | float, n_frames: int, rng, exposure_s: float = 0.01) -> np.ndarray:
         """``n_frames`` x H x W frames in DN (float32 holding integer codes) at ``exposure_s`` seconds."""
@@ -178,6 +190,9 @@ class HiddenEffectSensor:
             if "spatial_correlation" in eff:
                 read = _plane_filter(read, eff["spatial_correlation"]["a"])
             x = x + s.read_dn * read
+            if self.rtn_idx is not None:  # each trap in its high state with probability p_high, every frame
+                high = rng.random(self.rtn_idx.size) < eff["rtn"]["p_high"]
+                x.reshape(-1)[self.rtn_idx] += self.rtn_amp * high
             if "row_noise" in eff:
                 x = x + rng.normal(0, eff["row_noise"]["sigma_dn"], (h, 1))
             if "column_noise" in eff:  # NOT in simcam's vocabulary: tests the 'unexplained' path

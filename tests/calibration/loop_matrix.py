@@ -20,6 +20,8 @@ PAIRS = (
     ("row_noise", "periodic_pattern"),
     ("black_level_offset", "column_fpn"),
     ("prnu", "channel_gain"),
+    ("rtn", "hot_pixels"),
+    ("rtn", "heavy_tail_read"),
 )
 CASES = ((),) + tuple((e,) for e in EFFECTS) + PAIRS
 

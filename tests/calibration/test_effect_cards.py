@@ -27,6 +27,7 @@ from simcam.calibration.effects.periodic_pattern import PeriodicPattern
 from simcam.calibration.effects.prnu import Prnu
 from simcam.calibration.effects.quantization import Quantization
 from simcam.calibration.effects.row_noise import RowNoise
+from simcam.calibration.effects.rtn import Rtn
 from simcam.calibration.effects.spatial_correlation import SpatialCorrelation
 from simcam.calibration.model import LoopModel, marginal_variance, site_map
 from simcam.calibration.profile import models_from_noise_profile, noise_entry, noise_profile
@@ -48,6 +49,7 @@ EXAMPLES = {
     "dsnu": Dsnu(sigma_dn=2.0),
     "hot_pixels": HotPixels(fraction=0.004, log_mean=3.9, log_sigma=0.75, count=16),
     "dead_pixels": DeadPixels(dead_fraction=0.004, stuck_fraction=0.002, stuck_value_dn=959.0, count=24),
+    "rtn": Rtn(fraction=0.008, amplitude_dn=20.0, amplitude_log_sigma=0.3, p_high=0.35, count=20),
     "black_level_offset": BlackLevelOffset(offset_dn=[6.0, 5.5, 6.5, 6.0]),
     "quantization": Quantization(step_dn=4.0),
 }
@@ -116,7 +118,7 @@ def test_card_profile_round_trip(name):
     else:  # carried by the base: per-site beta1
         back = c.from_base(np.asarray(term.beta1))
     want = p.to_dict()
-    if name in ("hot_pixels", "dead_pixels"):  # the profile keeps the shares, not the count of the pixels fitted
+    if name in ("hot_pixels", "dead_pixels", "rtn"):  # the profile keeps the shares, not the count of the pixels fitted
         want.pop("count")
     _assert_close(back, want)
     # through profile.yaml's document and back to a LoopModel

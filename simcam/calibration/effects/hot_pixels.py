@@ -72,6 +72,8 @@ class HotPixelsCard(EffectCard, name="hot_pixels", params=HotPixels, null_field=
         m, _vt, _n = d.dark_map()
         r = dg.remove_profiles(m)
         hot = dg.hot_pixel_mask(d)  # persistent outliers (temporal median), offsets from the mean map
+        if not hot.any():  # fewer persistent outliers than the model's (none here): nothing to add
+            return HotPixels(fraction=0.0, log_mean=0.0, log_sigma=0.05, count=0)
         vals = r[hot]
         logs = np.log(np.maximum(vals, 1e-3))
         K = float(getattr(model, "K", 0.0) or 0.0)
