@@ -20,6 +20,7 @@ PAIRS = (
     ("row_noise", "periodic_pattern"),
     ("black_level_offset", "column_fpn"),
     ("prnu", "channel_gain"),
+    ("dark_current", "amp_glow"),
 )
 CASES = ((),) + tuple((e,) for e in EFFECTS) + PAIRS
 
