@@ -42,6 +42,9 @@ dark_tail_mass          heavy_tail_read     fraction of dark residuals beyond 4 
 dark_ppcc_lambda        heavy_tail_read     Tukey-lambda shape maximising the PPCC of dark residuals
 code_occupancy          quantization        used / possible integer codes in the central 98 % of darks
 lag1_corr / lag2_corr   spatial_correlation lag-1 / lag-2 autocorrelation inside each CFA plane
+glow_field              amp_glow            largest t-value of a smooth field rising to a corner or an
+                                            edge in the per-pixel dark slope map (DN/s), darks at
+                                            every exposure time (:func:`glow_field`)
 ======================  ==================  =====================================================
 
 The temporal residual is a frame minus the per-pixel mean of its sequence,
@@ -66,7 +69,7 @@ DIAGNOSTICS = (
     "ptc_curvature", "plane_gain_spread", "row_mean_excess", "row_spectrum_peak", "col_spectrum_peak",
     "col_temporal_excess", "dark_checker_jitter", "col_fpn_excess", "dsnu_excess", "hot_pixel_tail", "prnu_excess",
     "black_offset", "dark_signal_slope", "frame_mean_jitter", "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "lag1_corr",
-    "lag2_corr", "defect_pixels",
+    "lag2_corr", "defect_pixels", "glow_field",
     "telegraph_pixels",
 )
 
@@ -98,6 +101,15 @@ PRECEDENCE = {
 #: significant and outside the vocabulary (so absent from every simulation): temporal column
 #: noise leaves the even/odd-frame covariance of column profiles unbiased but inflates its spread,
 #: which the simulated captures then understate. Such a diagnostic is reported, not attributed.
+#: amplifier glow (``glow_field``: a smooth dark signal rising to a corner or an edge, growing with the
+#: exposure time) also lifts the mean dark slope and, at the shortest exposure, the dark level, the
+#: spread of the dark mean map, its column means, its brightest pixels and the dark residuals' tails
+#: (its shot noise is larger near the amplifier): its own, more specific symptom goes first
+for _name in ("dark_signal_slope", "black_offset", "dsnu_excess", "col_fpn_excess", "hot_pixel_tail",
+              "dark_tail_mass", "dark_ppcc_lambda"):
+    PRECEDENCE[_name] = PRECEDENCE.get(_name, ()) + ("glow_field",)
+del _name
+
 NULL_NEEDS = {
     "col_fpn_excess": ("col_temporal_excess",),
 }
@@ -130,6 +142,7 @@ NEEDS = {
     "lag2_corr": "needs a dark sequence",
     "defect_pixels": "needs a flat sequence (and darks or a declared black level)",
     "telegraph_pixels": "needs a dark sequence",
+    "glow_field": "needs darks at >= 2 exposure times",
 }
 
 
@@ -799,6 +812,130 @@ def dark_signal_slope(d: CaptureData):
     m = np.array([float(sst.trim_mean(f.astype(np.float64).mean(0).ravel(), 0.01)) for _, f in d.dark_series])
     w = np.array([f.shape[0] for _, f in d.dark_series], dtype=np.float64)
     return float(np.polyfit(t, m, 1, w=np.sqrt(w))[0])
+
+
+def dark_slope_map(d: CaptureData) -> np.ndarray | None:
+    """Per-pixel least-squares slope (DN/s) of the dark temporal-mean images against exposure time over
+    :attr:`CaptureData.dark_series` (sequences of one exposure time pooled, frame-weighted), with each
+    pixel that stands out of its CFA plane's 5 x 5 running median by more than 6 robust sigma (a hot
+    pixel with its own dark current, a stuck or dead one) replaced by that median; None with fewer than
+    two exposure times."""
+    if "slopemap" in d.cache:
+        return d.cache["slopemap"]
+    out = None
+    if d.dark_series and len({float(t) for t, _ in d.dark_series}) >= 2:
+        by_t: dict[float, list] = {}
+        for t, f in d.dark_series:
+            by_t.setdefault(float(t), []).append(f)
+        times = np.array(sorted(by_t))
+        maps = []
+        for t in times:
+            n = np.array([f.shape[0] for f in by_t[t]], dtype=np.float64)
+            maps.append(sum(ni * f.astype(np.float64).mean(0) for ni, f in zip(n, by_t[t])) / n.sum())
+        c = (times - times.mean()) / np.sum((times - times.mean()) ** 2)
+        out = sum(ci * m for ci, m in zip(c, maps))
+        for dy, dx in PLANE_OFFSETS:
+            p = out[dy::2, dx::2]
+            med = median_filter(p, size=5, mode="nearest")
+            r = p - med
+            s = robust_sigma(r)
+            bad = np.abs(r) > 6 * s if s > 0 else np.zeros(p.shape, bool)
+            p[bad] = med[bad]
+    d.cache["slopemap"] = out
+    return out
+
+
+#: fall-off lengths (share of the frame's diagonal, or of its extent across an edge) of the glow
+#: templates :func:`glow_field` tries; the card's fit refines the scale between them
+GLOW_SCALES = tuple(float(s) for s in np.geomspace(0.02, 1.0, 14))
+#: where an amplifier may sit: the noise stage's ``amp_glow`` origins
+GLOW_ORIGINS = ("top_left", "top_right", "bottom_left", "bottom_right", "top", "bottom", "left", "right")
+_GLOW_TEMPLATES: dict = {}
+
+
+def glow_template(shape: tuple[int, int], origin: str, scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """(field, field with each CFA plane's mean removed) of an amplifier glow of relative profile 1 at
+    ``origin`` falling off as ``exp(-d / (scale L))`` (:class:`simcam.noise.effects.dark.AmpGlow`'s field)."""
+    from ..noise.effects.dark import AmpGlow
+
+    f = AmpGlow(rate=1.0, origin=origin, scale=scale, electron=1.0).field(shape)
+    tc = f.copy()
+    for dy, dx in PLANE_OFFSETS:
+        tc[dy::2, dx::2] -= tc[dy::2, dx::2].mean()
+    return f, tc
+
+
+def _glow_templates(shape: tuple[int, int]) -> list:
+    """Per (origin, scale) of the grid: the plane-centred template, its squared norm, and the squared
+    norms of its row sums and of its column sums (what a row or a column offset projects onto it)."""
+    if shape not in _GLOW_TEMPLATES:
+        if len(_GLOW_TEMPLATES) > 8:
+            _GLOW_TEMPLATES.clear()
+        out = []
+        for o in GLOW_ORIGINS:
+            for s in GLOW_SCALES:
+                tc = glow_template(shape, o, s)[1]
+                out.append((o, s, tc, float(np.sum(tc * tc)), float(np.sum(tc.sum(1) ** 2)),
+                            float(np.sum(tc.sum(0) ** 2))))
+        _GLOW_TEMPLATES[shape] = out
+    return _GLOW_TEMPLATES[shape]
+
+
+def _second_diff_var(x: np.ndarray, axis: int) -> float:
+    """Variance of white noise of which ``x`` along ``axis`` is a sample (plus smooth terms): the mean
+    square of its second differences at lag 2 (inside a CFA plane) over 6; a linear gradient cancels."""
+    x = np.moveaxis(x, axis, 0)
+    if x.shape[0] < 5:
+        raise NotApplicable("the dark slope map has fewer than 5 lines along an axis")
+    d2 = x[4:] - 2 * x[2:-2] + x[:-4]
+    return float(np.mean(d2 * d2)) / 6.0
+
+
+def slope_noise(m: np.ndarray) -> tuple[float, float, float]:
+    """(pixel, row, column) variances of the white noise of the slope map ``m``: second differences
+    along rows see pixel + column noise, along columns pixel + row noise; those of the row means see
+    row noise + pixel / W, of the column means column noise + pixel / H. Solved for the three; a smooth
+    field (the glow itself) adds little to second differences."""
+    h, w = m.shape
+    ax = _second_diff_var(m, 1)  # pixel + column
+    ay = _second_diff_var(m, 0)  # pixel + row
+    br = _second_diff_var(m.mean(1), 0)  # row + pixel / W
+    bc = _second_diff_var(m.mean(0), 0)  # column + pixel / H
+    col = max((bc - ax / h) / (1 - 1 / h), 0.0)
+    row = max((br - ay / w) / (1 - 1 / w), 0.0)
+    pix = max(0.5 * ((ax - col) + (ay - row)), 0.0)
+    return pix, row, col
+
+
+def glow_fits(m: np.ndarray) -> list[tuple[str, float, float, float]]:
+    """(origin, scale, amplitude in DN/s, t-value) of the least-squares fit of each glow template of the
+    grid (with a constant per CFA plane: the flat dark current) to the slope map ``m``; the t-value's
+    variance is that of white pixel, row and column noise projected on the template
+    (:func:`slope_noise`)."""
+    pix, row, col = slope_noise(m)
+    out = []
+    for o, s, tc, n2, rr, cc in _glow_templates(m.shape):
+        proj = float(np.sum(tc * m))
+        var = pix * n2 + row * rr + col * cc
+        if not var > 0:
+            raise NotApplicable("the dark slope map has no noise (constant darks)")
+        out.append((o, s, proj / n2, proj / np.sqrt(var)))
+    return out
+
+
+def glow_field(d: CaptureData):
+    """Amplifier glow (EMVA 1288 Release 4.0 sec. 8, spatial non-uniformity of the dark signal at long
+    exposure; J. R. Janesick, *Photon Transfer*, SPIE 2007): on the per-pixel dark slope map
+    (:func:`dark_slope_map`, DN/s), the largest t-value over a grid of smooth fields rising to a corner
+    or an edge (:func:`glow_fits`). The flat dark current (a constant per plane) is fitted with each
+    field; DSNU and column FPN do not grow with the exposure and cancel in the slope; dark-current
+    non-uniformity is pixel noise of the slope map, whose level the t-value is divided by (so an
+    unmodelled DCNU does not lift it); row and column noise enter its variance through the field's
+    row and column sums."""
+    m = dark_slope_map(d)
+    if m is None:
+        return None
+    return float(max(f[3] for f in glow_fits(m)))
 
 
 STATISTICS = {name: globals()[name] for name in DIAGNOSTICS}

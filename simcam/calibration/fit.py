@@ -78,12 +78,13 @@ def _split(fitted: EffectParams | Fit) -> tuple[EffectParams, float | None]:
 def fit_effect(effect: str, d: dg.CaptureData, model: LoopModel, ctx: FitContext) -> LoopModel:
     """The model with ``effect`` added (parameters fitted on ``d`` by its card; a card that re-estimates
     the system gain sets K) and the read noise refitted; effects whose estimate depends on the rest of
-    the model (``refit_on_change``) are fitted again."""
+    the model (``refit_on_change``), or on ``effect`` (``refit_after``), are fitted again."""
     params, newK = _split(card_for(effect).fit(d, model, ctx))
     m = model.with_effect(effect, params)
     if newK is not None:
         m.K = newK
     for other in CARDS.values():
-        if other.refit_on_change and other.name in m.effects and other.name != effect:
+        if (other.refit_on_change or effect in other.refit_after) and other.name in m.effects and other.name != effect:
             m.effects[other.name] = _split(other.fit(d, m, ctx))[0]
+            m.refit_read()
     return m

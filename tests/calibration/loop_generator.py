@@ -26,6 +26,9 @@ seed eq. 3.6 for the Poisson-Gaussian core)::
   an exponential extra offset (``hot_pixels``).
 * ``dark_rate`` (``dark_current``) log-normal per pixel (mean ``rate_e_per_s``, log-spread
   ``log_sigma``), drawn once per sensor; with it, :func:`capture_set` adds a second dark at 1 s.
+* ``amp_glow``: dark electrons at ``rate_e_per_s`` x exp(-d / (``scale`` L)) per second, d the distance
+  from ``origin`` (a corner: L the diagonal; an edge: L the extent across it), added to ``dark_rate``;
+  with it, too, :func:`capture_set` adds the dark at 1 s.
 * ``flicker`` N(0, s^2) per frame, only where there is light (``frame_flicker``).
 * ``rtn``: a set of pixels (``fraction``, drawn once per sensor, after the other patterns) with steps
   log-normal about ``amplitude_dn`` (spread ``log_sigma``), added to ``x`` in the frames where the
@@ -48,7 +51,7 @@ import yaml
 EFFECTS = (
     "row_noise", "column_fpn", "dsnu", "prnu", "hot_pixels", "heavy_tail_read", "quantization",
     "spatial_correlation", "periodic_pattern", "black_level_offset", "frame_flicker",
-    "nonlinearity", "channel_gain", "dark_current", "dead_pixels",
+    "nonlinearity", "channel_gain", "dark_current", "dead_pixels", "amp_glow",
     "rtn",
 )
 
@@ -71,6 +74,7 @@ DEFAULT_EFFECTS = {
     "dark_current": {"rate_e_per_s": 40.0, "log_sigma": 0.3},
     "dead_pixels": {"dead_fraction": 0.004, "stuck_fraction": 0.002},
     "rtn": {"fraction": 0.015, "amplitude_dn": 20.0, "log_sigma": 0.3, "p_high": 0.4},
+    "amp_glow": {"rate_e_per_s": 40.0, "origin": "top_right", "scale": 0.2},
 }
 
 
@@ -148,6 +152,19 @@ class HiddenEffectSensor:
             p = eff["dark_current"]
             self.dark_rate = p["rate_e_per_s"] * np.exp(p["log_sigma"] * rng.standard_normal((h, w))
                                                         - p["log_sigma"] ** 2 / 2)
+        if "amp_glow" in eff:  # deterministic: draws nothing from the sensor's generator
+            p = eff["amp_glow"]
+            yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+            dy = yy if "top" in p["origin"] else h - 1 - yy
+            dx = xx if "left" in p["origin"] else w - 1 - xx
+            if p["origin"] in ("top", "bottom"):
+                dist, length = dy, h
+            elif p["origin"] in ("left", "right"):
+                dist, length = dx, w
+            else:
+                dist, length = np.hypot(dy, dx), np.hypot(h, w)
+            glow = p["rate_e_per_s"] * np.exp(-dist / (p["scale"] * length))
+            self.dark_rate = glow if self.dark_rate is None else self.dark_rate + glow
         self.gain = np.ones((h, w))
         if "channel_gain" in eff:
             g = eff["channel_gain"]["gains"]
@@ -229,7 +246,7 @@ def capture_set(spec: SensorSpec, *, n_frames: int = 12, flat_levels=(0.15, 0.35
             site[dy::2, dx::2] = colour[k]
     meta = {"iso": spec.iso, "cfa": spec.cfa, "black_level": spec.black_dn, "white_level": spec.white_dn}
     out = {"dark": ("dark", sensor.frames(0.0, n_frames, rng), dict(meta, exposure_s=0.01))}
-    if "dark_current" in spec.effects:
+    if "dark_current" in spec.effects or "amp_glow" in spec.effects:
         out["dark_long"] = ("dark", sensor.frames(0.0, n_frames, rng, 1.0), dict(meta, exposure_s=1.0))
     for i, lev in enumerate(flat_levels):
         mu_e = lev * full / spec.K * site

@@ -22,6 +22,7 @@ PAIRS = (
     ("prnu", "channel_gain"),
     ("rtn", "hot_pixels"),
     ("rtn", "heavy_tail_read"),
+    ("dark_current", "amp_glow"),
 )
 CASES = ((),) + tuple((e,) for e in EFFECTS) + PAIRS
 

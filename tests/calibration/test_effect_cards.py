@@ -13,6 +13,7 @@ from loop_generator import DEFAULT_EFFECTS, EFFECTS, SensorSpec, capture_set
 from loop_matrix import in_memory_capture
 from simcam.calibration import diagnostics as dg
 from simcam.calibration.effects import CARDS, DIAGNOSTIC_EFFECT, EffectCard, EffectParams, Fit, FitContext, card_for
+from simcam.calibration.effects.amp_glow import AmpGlow
 from simcam.calibration.effects.black_level_offset import BlackLevelOffset
 from simcam.calibration.effects.channel_gain import ChannelGain
 from simcam.calibration.effects.column_fpn import ColumnFpn
@@ -45,6 +46,7 @@ EXAMPLES = {
     "periodic_pattern": PeriodicPattern(amplitude_dn=2.0, period_px=8.0, axis="col"),
     "nonlinearity": Nonlinearity(c=-0.1),
     "dark_current": DarkCurrent(rate_e_per_s=40.0, log_sigma=0.3, gain_dn_per_e=2.0),
+    "amp_glow": AmpGlow(rate_e_per_s=40.0, origin="top_right", scale=0.2, gain_dn_per_e=2.0),
     "column_fpn": ColumnFpn(sigma_dn=1.0),
     "dsnu": Dsnu(sigma_dn=2.0),
     "hot_pixels": HotPixels(fraction=0.004, log_mean=3.9, log_sigma=0.75, count=16),

@@ -27,7 +27,7 @@ def test_base_only_adds_nothing():
 
 
 @pytest.mark.parametrize("effect", ["row_noise", "column_fpn", "quantization", "black_level_offset", "channel_gain",
-                                    "dead_pixels", "rtn"])
+                                    "dead_pixels", "rtn", "amp_glow"])
 def test_single_effect_is_named(effect):
     r = run_case((effect,))
     assert list(r.model.effects) == [effect]
@@ -60,6 +60,21 @@ def test_telegraph_pixels_told_apart_from_hot_pixels_and_heavy_tails():
     assert p.p_high == pytest.approx(0.4, abs=0.15)
     for case in (("rtn", "hot_pixels"), ("rtn", "heavy_tail_read")):
         assert set(run_case(case).model.effects) == set(case)
+
+
+def test_amp_glow_told_apart_from_dark_current():
+    """Glow alone is not read as a dark current (the glow field goes first and explains the mean dark slope);
+    glow with a dark current gives both, the dark current's rate without the glow's charge. 64 x 64 px,
+    6 fit frames at 0.01 s and 1 s: the glow amplitude's SE is ~1 % (t ~ 300), the scale's a few %."""
+    r = run_case(("amp_glow",))
+    assert list(r.model.effects) == ["amp_glow"] and r.unexplained == []
+    p = r.model.effects["amp_glow"]
+    assert p.origin == "top_right" and p.scale == pytest.approx(0.2, rel=0.15)
+    assert p.rate_e_per_s == pytest.approx(40.0, rel=0.1)
+    r = run_case(("dark_current", "amp_glow"))
+    assert set(r.model.effects) == {"dark_current", "amp_glow"}
+    assert r.model.effects["amp_glow"].origin == "top_right"
+    assert r.model.effects["dark_current"].rate_e_per_s == pytest.approx(40.0, rel=0.1)
 
 
 def test_fitted_parameters_match_the_hidden_ones():

@@ -16,7 +16,7 @@ from .. import diagnostics as _dg
 from . import (black_level_offset, channel_gain, column_fpn, dark_current, dead_pixels, dsnu, frame_flicker,
                heavy_tail_read, hot_pixels,
                nonlinearity, periodic_pattern, prnu, quantization, row_noise, spatial_correlation)
-from . import rtn
+from . import amp_glow, rtn
 from .card import EffectCard, EffectParams, Fit, FitContext, ProfileTerm
 
 __all__ = ["CARDS", "DIAGNOSTIC_EFFECT", "EffectCard", "EffectParams", "Fit", "FitContext", "ProfileTerm",
@@ -35,6 +35,7 @@ CARDS: dict[str, EffectCard] = {c.name: c for c in (
     row_noise.RowNoiseCard(),
     periodic_pattern.PeriodicPatternCard(),
     dark_current.DarkCurrentCard(),
+    amp_glow.AmpGlowCard(),
     nonlinearity.NonlinearityCard(),
     column_fpn.ColumnFpnCard(),
     dsnu.DsnuCard(),

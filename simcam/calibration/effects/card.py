@@ -240,6 +240,8 @@ class EffectCard:
         The residual diagnostics that propose it.
     fixed_pattern, gaussian, needs_darks, refit_on_change : bool
         How the loop treats it (see the class attributes' comments).
+    refit_after : tuple of str
+        Effects whose addition makes the loop refit it.
     marginal_rank : int or None
         Position of its term in the closed-form marginal variance.
     null_field, null_value : str or None, float
@@ -274,6 +276,8 @@ class EffectCard:
     needs_darks: ClassVar[bool] = False
     #: its fit depends on the rest of the model: refitted whenever another effect is added
     refit_on_change: ClassVar[bool] = False
+    #: effects whose addition changes its estimate: it is refitted when one of them is added
+    refit_after: ClassVar[tuple[str, ...]] = ()
     #: the parameter whose zero makes the effect the identity (:meth:`is_null`; None: no such parameter)
     null_field: ClassVar[str | None] = None
     #: the value of ``null_field`` that makes the effect the identity

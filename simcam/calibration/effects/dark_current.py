@@ -22,6 +22,9 @@ spread of the per-pixel slopes (row and column profiles removed), the log-normal
 with the temporal noise the slopes carry, is the measured one
 (:func:`simcam.calibration.dark_current.lognormal_log_sigma`). ``read_exposure_s`` is the shortest exposure time:
 the read noise is the dark variance there less the dark current's shot noise.
+With an amplifier glow in the model (``amp_glow``, a smooth dark signal that also grows with the
+exposure) its expected charge, ``K rate_glow t field``, is taken off the darks before the fit, and the
+dark current is fitted again whenever the glow is added.
 
 Profile. ``{type: dark_current, rate, dcnu_log_sigma, electron}``: rate in e-/s, the log-normal
 spread, and ``electron = K / (white - black)``; the noise stage draws Poisson(rate_i t) electrons
@@ -31,6 +34,8 @@ exposures of flats and scenes.
 """
 
 from __future__ import annotations
+
+import numpy as np
 
 from ..dark_current import series_fit
 from .card import DeclaredProfileCard, EffectParams, quantity
@@ -47,10 +52,10 @@ class DarkCurrent(EffectParams):
 
 
 class DarkCurrentCard(DeclaredProfileCard, name="dark_current", params=DarkCurrent, diagnostics=("dark_signal_slope",),
-                      null_field="rate_e_per_s"):
+                      null_field="rate_e_per_s", refit_after=("amp_glow",)):
 
     def fit(self, d, model, ctx):
-        r = series_fit(d.dark_series or [], model.K)
+        r = series_fit(_without_glow(d.dark_series or [], model), model.K)
         if r is None or r["e_per_s"] <= 0 or r["gain_dn_per_e"] <= 0:
             return DarkCurrent(rate_e_per_s=0.0, log_sigma=0.0, gain_dn_per_e=float(max(model.K, 0.0)))
         return DarkCurrent(rate_e_per_s=float(r["e_per_s"]), log_sigma=float(r["log_sigma"]),
@@ -58,3 +63,14 @@ class DarkCurrentCard(DeclaredProfileCard, name="dark_current", params=DarkCurre
 
     def dark_variance_dn2(self, p):
         return float(p.gain_dn_per_e ** 2 * p.rate_e_per_s * p.read_exposure_s)
+
+
+def _without_glow(series: list, model) -> list:
+    """The dark series less the model's amplifier glow's expected charge (DN), or as it is without one."""
+    g = model.effects.get("amp_glow")
+    if g is None or not series or g.rate_e_per_s <= 0:
+        return series
+    from ..diagnostics import glow_template
+
+    field = glow_template(series[0][1].shape[1:], g.origin, g.scale)[0] * (g.gain_dn_per_e * g.rate_e_per_s)
+    return [(t, f.astype(np.float64) - field * float(t)) for t, f in series]
