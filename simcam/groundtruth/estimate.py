@@ -409,14 +409,11 @@ def _run(burst, cfg, store, shape, cfa, lo, hi, dmap, dmask, timing, t0, progres
         info: dict[str, Any] = {"index": int(i)}
         fieldmap = None
         if reference is not None and i != ref_idx:
-            if cfg.alignment == "local":
-                # the matrix DFT and the thin-plate spline are BLAS products whose rounding depends on
-                # the BLAS thread count: one thread, so the field is the same bytes on any machine split
-                with threadpool_limits(limits=1, user_api="blas"):
-                    lm, sh, rel = local_shifts(reference, x)
-                    keep = reject_outliers(reference.grid, sh, rel, cfg.outlier_px)
-                    fieldmap = (dense_field(lm[keep], sh[keep], shape, cfa, smoothing=cfg.tps_smoothing)
-                                if keep.any() else None)
+            if cfg.alignment == "local":  # BLAS on one thread: see the map_threads call below
+                lm, sh, rel = local_shifts(reference, x)
+                keep = reject_outliers(reference.grid, sh, rel, cfg.outlier_px)
+                fieldmap = (dense_field(lm[keep], sh[keep], shape, cfa, smoothing=cfg.tps_smoothing)
+                            if keep.any() else None)
                 info["landmarks_unreliable"] = int((~rel).sum())
                 info["landmarks_rejected"] = int((rel & ~keep).sum())
                 if fieldmap is None:  # no structure to register against: leave the frame where it is
@@ -448,7 +445,13 @@ def _run(burst, cfg, store, shape, cfa, lo, hi, dmap, dmask, timing, t0, progres
         _tick(bar)
         return info
 
-    per_frame = map_threads(align_frame, [int(i) for i in kept])
+    # The matrix DFT and the thin-plate spline are BLAS products whose rounding depends on the BLAS
+    # thread count: one thread, so the field is the same bytes on any machine. The limit is set here,
+    # once around all frames: threadpoolctl's limit is process-wide, and entered and left in each
+    # frame's thread, one frame's exit restored the BLAS threads while another frame was still inside
+    # (ground truths that differed from run to run in their last bits with 2 threads).
+    with threadpool_limits(limits=1, user_api="blas"):
+        per_frame = map_threads(align_frame, [int(i) for i in kept])
     _close(bar)
     timing["align"] = time.perf_counter() - t
 

@@ -159,6 +159,45 @@ def test_acceptance_run_synthetic_dng_burst():
     assert ratio("clipped pixels: WLS / oracle") <= 1.2
 
 
+def test_blas_stays_on_one_thread_while_frames_align_on_threads(synth, tmp_path, monkeypatch):
+    """The local alignment's BLAS products run on one BLAS thread (their rounding depends on the count)
+    while frames align on 2 threads: the limit is held around all frames, not entered and left in each
+    frame's thread, where one frame's exit restored the BLAS threads under another (run-to-run
+    differences in the last bits of the ground truth)."""
+    import time
+
+    from threadpoolctl import threadpool_info
+
+    import simcam.groundtruth.estimate as est
+
+    seen = []
+    real_shifts, real_field = est.local_shifts, est.dense_field
+    calls = iter(range(10_000))
+
+    def blas_threads():
+        return max((i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"), default=1)
+
+    def shifts(*a, **k):  # frames of different lengths, so that one thread's frame ends inside the other's
+        time.sleep(0.03 * (next(calls) % 3))
+        seen.append(blas_threads())
+        return real_shifts(*a, **k)
+
+    def field(*a, **k):
+        seen.append(blas_threads())
+        out = real_field(*a, **k)
+        time.sleep(0.02)
+        seen.append(blas_threads())
+        return out
+
+    monkeypatch.setattr(est, "local_shifts", shifts)
+    monkeypatch.setattr(est, "dense_field", field)
+    monkeypatch.setenv("SIMCAM_THREADS", "2")
+    sb, frames, _ = synth
+    cfg = GroundTruthConfig(alignment="local", tile_pixels=20000, memory_budget_bytes=0, scratch_dir=str(tmp_path))
+    estimate_ground_truth(Burst.from_arrays(frames[:12], cfa="RGGB"), config=cfg)
+    assert len(seen) >= 20 and set(seen) == {1}
+
+
 def test_same_bytes_for_any_thread_count(synth, tmp_path, monkeypatch):
     """Frames are aligned and robust-mean tiles computed on threads (simcam.parallel): each writes
     only its own frame / rows, so 1, 2 and 3 threads give the same arrays and report."""
