@@ -23,6 +23,7 @@ Usage::
 
     python benchmarks/batch.py                 # 64 renders, 20,000 patches, 8 bursts
     python benchmarks/batch.py --quick         # tiny sizes (smoke test)
+    python benchmarks/batch.py --jobs synth --repeats 5   # one job, medians of 5 interleaved rounds
 """
 
 from __future__ import annotations
@@ -40,6 +41,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+import numpy as np
 
 if __package__ in (None, ""):  # run as a script: make the repository importable
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
@@ -138,6 +141,7 @@ def main(argv=None) -> int:
     ap.add_argument("--bursts", type=int, default=8)
     ap.add_argument("--jobs", default="render,synth,gt")
     ap.add_argument("--workdir", default=None)
+    ap.add_argument("--repeats", type=int, default=1, help="rounds of all five configurations; medians reported")
     args = ap.parse_args(argv)
     if args.quick:
         args.renders, args.size, args.patches, args.bursts = 4, "640x480", 400, 2
@@ -164,7 +168,7 @@ def main(argv=None) -> int:
         doc = Pipeline.from_yaml("srgb").to_dict()
         rows.append(bench("render", f"{args.renders} renders of a {w}x{h} DNG -> PNG", render_job, work, lambda out: [
             Task(str(d), {"input": str(d), "output": str(out / f"{d.stem}.png"), "pipeline": doc, "seed": 0,
-                          "index": i}) for i, d in enumerate(dngs)], lambda out: [out]))
+                          "index": i}) for i, d in enumerate(dngs)], lambda out: [out], args.repeats))
     if "synth" in jobs:
         per = 250 if not args.quick else 50
         n_src = max(1, args.patches // per)
@@ -186,7 +190,8 @@ def main(argv=None) -> int:
             return [Task(str(s), {**base, "source": str(s), "index": i}) for i, s in enumerate(srcs)]
 
         rows.append(bench("synth", f"{n_src * per} patches (4x32x32) from {n_src} 1 MP DNGs -> Zarr",
-                          synth_patches_job, work, synth_tasks, lambda out: [out / "set.zarr"]))
+                          synth_patches_job, work, synth_tasks, lambda out: [out / "set.zarr"],
+                          args.repeats))
     if "gt" in jobs:
         from simcam.io.dng import read_dng
         from simcam.synth import synth
@@ -205,16 +210,20 @@ def main(argv=None) -> int:
                           work, lambda out: [Task(str(b), {"burst": str(b), "npz": str(out / f"{b.name}.npz"),
                                                             "report": str(out / f"{b.name}.json"), "alignment": "local",
                                                             "progress": False}) for b in bursts],
-                          lambda out: [out]))
+                          lambda out: [out], args.repeats))
     print()
+    print(f"Medians of {args.repeats} interleaved round(s); 'dask 2 vs 1' is the ratio of the medians, with the "
+          "range of the per-round ratios")
     print("| job | items | " + " | ".join(f"{c} s" for c in CONFIGS) + " | dask 2 vs 1 | dask 2 vs for loop | "
-          "dask 2 vs Pool(2) | dask 1 fixed cost s | peak RSS / worker |")
-    print("|---|---|" + "---:|" * (len(CONFIGS) + 5))
+          "dask 2 vs Pool(2) | Pool(2) vs Pool(1) | dask 1 fixed cost s | peak RSS / worker |")
+    print("|---|---|" + "---:|" * (len(CONFIGS) + 6))
     for r in rows:
         t = r["times"]
+        lo, hi = r["ratio_range"]
         print(f"| {r['job']} | {r['what']} | " + " | ".join(f"{t[c]:.1f}" for c in CONFIGS)
-              + f" | **{t['dask 1'] / t['dask 2']:.2f}x** | {t['for loop'] / t['dask 2']:.2f}x | "
-              f"{t['Pool(2)'] / t['dask 2']:.2f}x | {t['dask 1'] - r['items']['dask 1']:.1f} | {r['rss']:.0f} MiB |")
+              + f" | **{t['dask 1'] / t['dask 2']:.2f}x** ({lo:.2f}-{hi:.2f}) | {t['for loop'] / t['dask 2']:.2f}x | "
+              f"{t['Pool(2)'] / t['dask 2']:.2f}x | {t['Pool(1)'] / t['Pool(2)']:.2f}x | "
+              f"{t['dask 1'] - r['items']['dask 1']:.1f} | {r['rss']:.0f} MiB |")
     print(f"\nload average {os.getloadavg()[0]:.2f} at the end; outputs byte-identical across the five "
           f"configurations: {all(r['same'] for r in rows)}")
     if not args.workdir:
@@ -222,24 +231,38 @@ def main(argv=None) -> int:
     return 0 if all(r["same"] for r in rows) else 1
 
 
-def bench(job_name, what, job, work: Path, make_tasks, outputs) -> dict:
-    times, items, digests, rss = {}, {}, {}, 0.0
-    for c in CONFIGS:
-        out = work / f"{job_name}_out" / c.replace(" ", "_").replace("(", "").replace(")", "")
-        shutil.rmtree(out, ignore_errors=True)
-        out.mkdir(parents=True)
-        tasks = make_tasks(out)
-        times[c], r, items[c] = run_config(c, job, tasks)
-        if c.startswith("dask"):
-            rss = max(rss, r)
-        digests[c] = digest(outputs(out))
-        print(f"{job_name}: {c}: {times[c]:.2f} s (the items themselves: {items[c]:.2f} s summed)", flush=True)
-        shutil.rmtree(out, ignore_errors=True)
+def bench(job_name, what, job, work: Path, make_tasks, outputs, repeats: int = 1) -> dict:
+    """Each configuration ``repeats`` times, interleaved (round r runs all five before round r + 1, so a
+    slow spell of the machine hits every configuration); the medians are reported."""
+    walls: dict[str, list] = {c: [] for c in CONFIGS}
+    own: dict[str, list] = {c: [] for c in CONFIGS}
+    digests, rss = {}, 0.0
+    for rnd in range(repeats):
+        for c in CONFIGS:
+            out = work / f"{job_name}_out" / c.replace(" ", "_").replace("(", "").replace(")", "")
+            shutil.rmtree(out, ignore_errors=True)
+            out.mkdir(parents=True)
+            tasks = make_tasks(out)
+            wall, r, summed = run_config(c, job, tasks)
+            walls[c].append(wall)
+            own[c].append(summed)
+            if c.startswith("dask"):
+                rss = max(rss, r)
+            d = digest(outputs(out))
+            digests.setdefault(c, d)
+            if digests[c] != d:
+                digests[c] = "differs between repeats"
+            print(f"{job_name}: round {rnd + 1}: {c}: {wall:.2f} s (the items themselves: {summed:.2f} s summed)",
+                  flush=True)
+            shutil.rmtree(out, ignore_errors=True)
     same = len(set(digests.values())) == 1
     if not same:
         print(f"{job_name}: outputs differ between configurations: {digests}")
-    return {"job": job_name, "what": what, "times": times, "items": items, "rss": rss, "same": same}
-
+    times = {c: float(np.median(v)) for c, v in walls.items()}
+    items = {c: float(np.median(v)) for c, v in own.items()}
+    ratios = [a / b for a, b in zip(walls["dask 1"], walls["dask 2"])]
+    return {"job": job_name, "what": what, "times": times, "items": items, "rss": rss, "same": same,
+            "ratio_range": (min(ratios), max(ratios)), "repeats": repeats}
 
 if __name__ == "__main__":
     sys.exit(main())
