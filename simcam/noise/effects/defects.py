@@ -8,6 +8,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from .base import Effect, register_effect
+from .dark import exposure_of
 
 
 @register_effect
@@ -99,8 +100,6 @@ class HotPixels(Effect):
         flat = x.reshape(-1)
         off = ctx.fixed.get("hot_offset", np.float32(self.hot_offset))
         if self.hot_rate > 0:
-            from .dark import exposure_of
-
             off = (off + ctx.fixed["hot_rate"] * np.float32(exposure_of(ctx, self.type))).astype(np.float32)
         if self.hot_electron is None:
             flat[ctx.fixed["hot"]] += off
