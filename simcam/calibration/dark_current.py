@@ -91,11 +91,10 @@ def series_fit(series: list, K: float | None) -> dict | None:
     None or <= 0: taken from the darks themselves, variance slope / mean slope, the dark current
     being Poisson). Returns None with fewer than two exposure times, else the slopes of the mean dark
     level (DN/s) and of the temporal variance (DN^2/s) against exposure time, the gain used, the
-    mean rate (e-/s, from the mean's slope) and the spread of the per-pixel rate: the robust standard
-    deviation of the per-pixel least-squares slope of the temporal-mean images (row and column
-    profiles removed: they are not pixel dark current), its variance corrected by the temporal noise
-    the slope carries (module docstring), as a log-normal ``log_sigma`` (coefficient of variation
-    ``sqrt(exp(s^2) - 1)``).
+    mean rate (e-/s, from the mean's slope) and the spread of the per-pixel rate: the log-normal
+    ``log_sigma`` whose interquartile range over median, with the temporal noise the slope carries,
+    is that of the per-pixel least-squares slopes of the temporal-mean images (row and column
+    profiles removed: they are not pixel dark current; :func:`lognormal_log_sigma`).
     """
     from .diagnostics import remove_profiles, robust_sigma
 
