@@ -73,43 +73,10 @@ DIAGNOSTICS = (
     "telegraph_pixels",
 )
 
-#: When the diagnostic on the left is chosen but one on the right is also
-#: significant, the right one is taken first: it is the more specific symptom
-#: of an effect that also inflates the left one.
-PRECEDENCE = {
-    "row_mean_excess": ("row_spectrum_peak",),
-    "col_temporal_excess": ("col_spectrum_peak",),
-    # in-plane crosstalk and quantisation change the spread of per-site means too
-    "dark_checker_jitter": ("lag1_corr", "lag2_corr", "code_occupancy"),
-    "dsnu_excess": ("hot_pixel_tail", "defect_pixels"),
-    "col_fpn_excess": ("hot_pixel_tail", "dsnu_excess", "defect_pixels"),  # per-pixel fixed offsets leak into column means
-    # a pixel stuck at a high code is also a persistent dark outlier; it does not respond to light
-    "hot_pixel_tail": ("defect_pixels", "telegraph_pixels"),
-    # a dark current is the one symptom at every exposure time; at the shortest one it lifts the dark level
-    "black_offset": ("dark_signal_slope", "hot_pixel_tail", "col_fpn_excess", "dsnu_excess"),
-    "frame_mean_jitter": ("row_spectrum_peak", "row_mean_excess", "col_spectrum_peak"),
-    "plane_gain_spread": ("ptc_curvature",),
-    # hot pixels whose offset is charge carry its shot noise: a temporal tail of their own, which their
-    # persistent offset (the more specific symptom) explains
-    "dark_tail_mass": ("code_occupancy", "hot_pixel_tail", "telegraph_pixels"),
-    "dark_ppcc_lambda": ("code_occupancy", "hot_pixel_tail", "telegraph_pixels"),
-    "lag1_corr": ("code_occupancy",),
-    "lag2_corr": ("code_occupancy", "lag1_corr"),
-}
-
 #: The bootstrap null of the diagnostic on the left is not valid while one on the right is
 #: significant and outside the vocabulary (so absent from every simulation): temporal column
 #: noise leaves the even/odd-frame covariance of column profiles unbiased but inflates its spread,
 #: which the simulated captures then understate. Such a diagnostic is reported, not attributed.
-#: amplifier glow (``glow_field``: a smooth dark signal rising to a corner or an edge, growing with the
-#: exposure time) also lifts the mean dark slope and, at the shortest exposure, the dark level, the
-#: spread of the dark mean map, its column means, its brightest pixels and the dark residuals' tails
-#: (its shot noise is larger near the amplifier): its own, more specific symptom goes first
-for _name in ("dark_signal_slope", "black_offset", "dsnu_excess", "col_fpn_excess", "hot_pixel_tail",
-              "dark_tail_mass", "dark_ppcc_lambda"):
-    PRECEDENCE[_name] = PRECEDENCE.get(_name, ()) + ("glow_field",)
-del _name
-
 NULL_NEEDS = {
     "col_fpn_excess": ("col_temporal_excess",),
 }

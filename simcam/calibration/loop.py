@@ -11,24 +11,22 @@ Per ISO group of a capture set:
    discrepancies get Student-t p-values; significance by Holm's step-down
    procedure at family-wise ``alpha`` (default 0.01) over the applicable
    diagnostics.
-4. The most significant diagnostic (with the precedence rules of
-   ``diagnostics.PRECEDENCE``) names an effect (the one whose card lists it,
-   :mod:`simcam.calibration.effects`); its card fits the parameters; the
-   candidate model is simulated again. On held-out frames: the pixel marginal
-   KL (Noise Flow binning, Jeffreys-smoothed model histogram) with its
-   sampling floor and excess, the structured marginal KL of aggregated noise
-   (:mod:`simcam.calibration.heldout`), NLL/dim of the model's Gaussian marginal
-   where it has one, and the diagnostic's own standardised discrepancy,
-   before and after. The structured KL is reported, not used in decisions.
-5. The effect is kept if the held-out discrepancy of its diagnostic shrinks and
-   the held-out KL does not grow (beyond ``kl_tolerance`` relative plus twice
-   the KL's sampling floor, :func:`simcam.calibration.heldout.kl_floor`); otherwise the
-   diagnostic is left out of the choice until another effect is accepted (an
-   effect can hurt the marginal while a bigger one is still missing), and is
-   reported ``unexplained`` if it is still significant at the end. A
-   significant diagnostic that names no effect, or whose effect is already in
-   the model, is ``unexplained`` too. The loop stops when nothing significant
-   is left (or after ``max_iterations``).
+4. Attribution by held-out model comparison (:mod:`simcam.calibration.attribution`): every
+   significant diagnostic proposes the effect whose card lists it
+   (:mod:`simcam.calibration.effects`; a diagnostic no card lists, or whose effect is already in the
+   model, is ``unexplained``); *every* proposed effect is fitted by its card, the current model and
+   each candidate are simulated on the held-out sequences with the same random streams, and each
+   candidate is scored by the held-out synthetic log-likelihood of all applicable diagnostics
+   (gain over the current model, with its jackknife standard error).
+5. The best candidate is added when its gain exceeds its sampling noise
+   (:meth:`simcam.calibration.attribution.Comparison.beats`) and the held-out pixel marginal KL
+   (Noise Flow binning, Jeffreys-smoothed model histogram) does not grow beyond ``kl_tolerance``
+   relative plus twice its sampling floor (:func:`simcam.calibration.heldout.kl_floor`); the
+   structured marginal KL of aggregated noise (:mod:`simcam.calibration.heldout`) and the NLL/dim of
+   the model's Gaussian marginal are reported before and after, with every candidate's score.
+   When no candidate beats the current model, the proposing diagnostics are ``unexplained`` with the
+   candidates' scores as the reason, and the loop stops (also when nothing significant is left, or
+   after ``max_iterations``).
 """
 
 from __future__ import annotations
@@ -39,6 +37,7 @@ import numpy as np
 
 from ..errors import DatasetError
 from . import diagnostics as dg
+from .attribution import compare
 from .capture import CaptureSet, Sequence
 from .effects import FitContext, card_for, effect_for
 from .fit import base_fit, fit_effect
@@ -50,7 +49,7 @@ from .simulate import simulate_capture
 @dataclass
 class LoopConfig:
     replicates: int = 16
-    heldout_replicates: int = 8
+    heldout_replicates: int = 16  # held-out simulations per model scored (attribution by model comparison)
     alpha: float = 0.01
     max_iterations: int = 10
     seed: int = 0
@@ -251,7 +250,13 @@ class Loop:
         self.data_stats = dg.compute_all(group.fit_data, reasons=self.not_applicable)
         self.held_stats = dg.compute_all(group.held_data)
         self.applicable = [k for k, v in self.data_stats.items() if v is not None]
-        self._eval_counter = 0
+        self._floors: dict[str, float] = {}
+
+    def held_floor(self, name: str) -> float:
+        """The resolution of diagnostic ``name`` on the held-out data (:func:`diagnostics.resolution`)."""
+        if name not in self._floors:
+            self._floors[name] = dg.resolution(name, self.g.held_data)
+        return self._floors[name]
 
     def _bar(self, n: int, what: str):
         from tqdm.auto import tqdm
@@ -311,12 +316,42 @@ class Loop:
         out = {"kl": kl, "nll": nll_per_dim(self.g.held, specs, model), "kl_floor": floor,
                "kl_excess": max(kl - floor, 0.0), "kl_structured": st["kl"], "structured": st["families"],
                "real_noise": _thin(real), "model_noise": _thin(np.concatenate(plot_noise), 2 * PLOT_VALUES)}
+        out["sims"] = {}
         for name in diagnostics:
             vals = [s[name] for s in sim_stats]
+            out["sims"][name] = vals
             if self.held_stats.get(name) is None or any(v is None for v in vals):
                 continue
-            out[name] = dg.discrepancy(name, self.held_stats[name], vals, dg.resolution(name, self.g.held_data))
+            out[name] = dg.discrepancy(name, self.held_stats[name], vals, self.held_floor(name))
         return out
+
+    def _candidate(self, effect: str, proposed_by: list, model: LoopModel, tag: int, held_cur: dict):
+        """Fit ``effect`` on the fit frames and score it on the held-out ones against the current model
+        (same random streams): (candidate record for the report, fitted model or None, its held-out dict)."""
+        card = card_for(effect)
+        chosen = proposed_by[0]
+        rec = {"effect": effect, "proposed_by": [d.name for d in proposed_by]}
+        ctx = FitContext(diagnostic=chosen.name, value=chosen.value, sim_mean=chosen.sim_mean,
+                         seed=self.cfg.seed * 1000 + tag, simulate=simulate_capture,
+                         dark_specs=[sp for sp in self.g.specs(model, self.g.fit)
+                                     if sp.kind == "dark" and not sp.series_only])
+        if card.needs_darks and not ctx.dark_specs:
+            return dict(rec, skipped="needs a dark sequence to fit"), None, None
+        cand = fit_effect(effect, self.g.fit_data, model, ctx)
+        rec["parameters"] = cand.effects[effect].to_dict()
+        if card.is_null(cand.effects[effect]):
+            return dict(rec, skipped=f"the fitted {effect} has zero magnitude"), None, None
+        held = self.heldout(cand, 0, tuple(self.applicable))  # the streams of held_cur (common random numbers)
+        cmp = compare(self.held_stats, self._floor_map(), held_cur["sims"], held["sims"])
+        kl_ok = held["kl"] <= held_cur["kl"] * (1 + self.cfg.kl_tolerance) + 2 * held_cur["kl_floor"]
+        rec.update({"heldout_gain": cmp.gain, "heldout_gain_sd": cmp.sd, "statistics_compared": cmp.diagnostics,
+                    "moved_most": [{"diagnostic": n, "gain": g} for n, g in cmp.top()],
+                    "kl_before": held_cur["kl"], "kl_after": held["kl"], "kl_ok": bool(kl_ok),
+                    "beats_current": bool(cmp.beats() and kl_ok)})
+        return rec, cand, held
+
+    def _floor_map(self) -> dict:
+        return {n: self.held_floor(n) for n in self.applicable}
 
     def run(self, start: LoopModel | None = None) -> GroupResult:
         cfg = self.cfg
@@ -327,92 +362,95 @@ class Loop:
         discs, _ = self.evaluate(model, tag)
         res.base_disc = discs
         excluded: set[str] = set()  # unexplained for good
-        rejected: set[str] = set()  # effect did not help; retried once the model changes
         unmodelled: set[str] = set()  # significant, and no effect of the vocabulary explains them
-        held_before = self.heldout(model, tag, tuple(self.applicable))
-        res.heldout_base = _summary(held_before)
-        res.plots["hist_base"] = (held_before["real_noise"], held_before["model_noise"])
+        held_cur = self.heldout(model, tag, tuple(self.applicable))
+        res.heldout_base = _summary(held_cur)
+        res.plots["hist_base"] = (held_cur["real_noise"], held_cur["model_noise"])
+
+        def strength(d):
+            return (-np.log10(max(d.p, 1e-300)), abs(d.z))
+
+        def unexplained(d, reason):
+            excluded.add(d.name)
+            res.unexplained.append({"diagnostic": d.name, "discrepancy": d.z, "reason": reason})
+
         for _it in range(cfg.max_iterations):
-            sig = [d for d in discs if d.significant and d.name not in excluded | rejected]
+            sig = sorted((d for d in discs if d.significant and d.name not in excluded), key=strength, reverse=True)
             if not sig:
                 break
-            def strength(d):
-                return (-np.log10(max(d.p, 1e-300)), abs(d.z))
-
-            chosen = max(sig, key=strength)
-            # a more specific symptom of an effect that also inflates the chosen one goes first; of several,
-            # the most significant (not the first listed)
-            pre = [d for d in sig if d.name in dg.PRECEDENCE.get(chosen.name, ())]
-            if pre:
-                chosen = max(pre, key=strength)
-            effect = effect_for(chosen.name)
-            outside = [b for b in dg.NULL_NEEDS.get(chosen.name, ()) if b in unmodelled]
-            if outside:
-                excluded.add(chosen.name)
-                res.unexplained.append({"diagnostic": chosen.name, "discrepancy": chosen.z,
-                                        "reason": f"not attributed: {outside[0]} (significant, no effect of the "
-                                                  "vocabulary) inflates its spread beyond the simulated one"})
-                continue
-            if effect is None or effect in model.effects:
+            proposals: dict[str, list] = {}  # effect -> the significant diagnostics proposing it, strongest first
+            for d in sig:
+                effect = effect_for(d.name)
                 if effect is None:
-                    unmodelled.add(chosen.name)
-                excluded.add(chosen.name)
-                why = "no effect of the vocabulary explains it" if effect is None else \
-                    f"{effect} is already in the model and does not explain it"
-                res.unexplained.append({"diagnostic": chosen.name, "discrepancy": chosen.z, "reason": why})
+                    unmodelled.add(d.name)
+            for d in sig:
+                effect = effect_for(d.name)
+                outside = [b for b in dg.NULL_NEEDS.get(d.name, ()) if b in unmodelled]
+                if effect is None:
+                    unexplained(d, "no effect of the vocabulary explains it")
+                elif outside:
+                    unexplained(d, f"not attributed: {outside[0]} (significant, no effect of the vocabulary) "
+                                   "inflates its spread beyond the simulated one")
+                elif effect in model.effects:
+                    unexplained(d, f"{effect} is already in the model and does not explain it")
+                else:
+                    proposals.setdefault(effect, []).append(d)
+            if not proposals:
                 continue
             tag += 1
-            card = card_for(effect)
-            ctx = FitContext(diagnostic=chosen.name, value=chosen.value, sim_mean=chosen.sim_mean,
-                             seed=cfg.seed * 1000 + tag, simulate=simulate_capture,
-                             dark_specs=[sp for sp in self.g.specs(model, self.g.fit)
-                                         if sp.kind == "dark" and not sp.series_only])
-            if card.needs_darks and not ctx.dark_specs:
-                excluded.add(chosen.name)
-                res.unexplained.append({"diagnostic": chosen.name, "discrepancy": chosen.z,
-                                        "reason": "needs a dark sequence to fit"})
+            tried = [self._candidate(effect, ds, model, tag, held_cur) for effect, ds in proposals.items()]
+            scored = [t for t in tried if t[1] is not None]
+            best = max(scored, key=lambda t: t[0]["heldout_gain"]) if scored else None
+            for rec, _c, _h in tried:
+                rec["chosen"] = best is not None and rec is best[0]
+            if best is None:  # no candidate could be fitted: each proposing diagnostic says why
+                for rec, _c, _h in tried:
+                    for name in rec["proposed_by"]:
+                        unexplained(next(d for d in sig if d.name == name), rec["skipped"])
                 continue
-            cand = fit_effect(effect, self.g.fit_data, model, ctx)
-            new_discs, _ = self.evaluate(cand, tag)
-            after = next((d for d in new_discs if d.name == chosen.name), None)
-            held_after = self.heldout(cand, tag, (chosen.name,))
-            hb = held_before.get(chosen.name)
-            ha = held_after.get(chosen.name)
-            diag_better = (hb is None or ha is None) or abs(ha.z) < abs(hb.z)
-            kl_ok = held_after["kl"] <= held_before["kl"] * (1 + cfg.kl_tolerance) + 2 * held_before["kl_floor"]
-            null_fit = card.is_null(cand.effects[effect])
-            accepted = bool(diag_better and kl_ok and not null_fit)
+            brec, cand, held = best
+            effect = brec["effect"]
+            chosen = proposals[effect][0]
+            accepted = brec["beats_current"]
+            new_discs = self.evaluate(cand, tag)[0] if accepted else None
+            after = next((d for d in new_discs if d.name == chosen.name), None) if accepted else None
+            hb, ha = held_cur.get(chosen.name), held.get(chosen.name)
             rec = {
-                "effect": effect, "parameters": cand.effects[effect].to_dict(),
+                "effect": effect, "parameters": brec["parameters"],
                 "diagnostic": chosen.name, "discrepancy_before": chosen.z,
                 "discrepancy_after": None if after is None else after.z,
                 "p_before": chosen.p, "p_after": None if after is None else after.p,
-                "heldout": {"kl_before": held_before["kl"], "kl_after": held_after["kl"],
-                            "kl_excess_before": held_before["kl_excess"], "kl_excess_after": held_after["kl_excess"],
-                            "kl_structured_before": held_before["kl_structured"],
-                            "kl_structured_after": held_after["kl_structured"],
-                            "structured_before": held_before["structured"],
-                            "structured_after": held_after["structured"],
-                            "nll_before": held_before["nll"], "nll_after": held_after["nll"],
+                "heldout": {"kl_before": held_cur["kl"], "kl_after": held["kl"],
+                            "kl_excess_before": held_cur["kl_excess"], "kl_excess_after": held["kl_excess"],
+                            "kl_structured_before": held_cur["kl_structured"],
+                            "kl_structured_after": held["kl_structured"],
+                            "structured_before": held_cur["structured"],
+                            "structured_after": held["structured"],
+                            "nll_before": held_cur["nll"], "nll_after": held["nll"],
                             "discrepancy_before": None if hb is None else hb.z,
-                            "discrepancy_after": None if ha is None else ha.z},
+                            "discrepancy_after": None if ha is None else ha.z,
+                            "gain": brec["heldout_gain"], "gain_sd": brec["heldout_gain_sd"]},
                 "accepted": accepted,
+                "candidates": [t[0] for t in tried],
             }
             res.plots.setdefault("hists", []).append(
-                (effect, held_before["real_noise"], held_before["model_noise"], held_after["model_noise"]))
+                (effect, held_cur["real_noise"], held_cur["model_noise"], held["model_noise"]))
             res.iterations.append(rec)
             if accepted:
-                model, discs = cand, new_discs
-                held_before = self.heldout(model, tag, tuple(self.applicable))
-                rejected.clear()
-            else:
-                rejected.add(chosen.name)
-                why = (f"the fitted {effect} has zero magnitude" if null_fit else
-                       f"adding {effect} did not reduce the held-out error")
-                res.unexplained.append({"diagnostic": chosen.name, "discrepancy": chosen.z, "reason": why})
+                model, discs, held_cur = cand, new_discs, held
+                continue
+            # no candidate beats the current model: every proposing diagnostic stays unexplained
+            listed = "; ".join(
+                f"{r['effect']}: {r['skipped']}" if "skipped" in r else
+                f"{r['effect']}: held-out gain {r['heldout_gain']:.3g} ± {r['heldout_gain_sd']:.2g} nats"
+                + ("" if r["kl_ok"] else ", pixel KL grew")
+                for r, _c, _h in tried)
+            for ds in proposals.values():
+                for d in ds:
+                    unexplained(d, f"no candidate beat the current model on held-out frames ({listed})")
         res.model = model
         res.final = discs
-        res.heldout_final = _summary(held_before)
+        res.heldout_final = _summary(held_cur)
         listed = {u["diagnostic"] for u in res.unexplained}
         for d in discs:
             if d.significant and d.name not in listed:

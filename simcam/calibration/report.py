@@ -621,6 +621,7 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
                          f"<td>{_fmt(h['nll_after'])}</td><td>{'yes' if it['accepted'] else 'no'}</td>"
                          f"<td class=l>{html.escape(format_parameters(it['effect'], it['parameters']))}</td></tr>")
         parts.append("</table>")
+        parts.append(_candidates_table(g["iterations"]))
         if g["unexplained"]:
             parts.append("<h3>Unexplained</h3><ul>" + "".join(
                 f"<li>{u['diagnostic']}: z = {_fmt(u['discrepancy'])} ({html.escape(u['reason'])})</li>"
@@ -647,6 +648,29 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
                              f"src='data:image/png;base64,{figs[iso][key]}'>")
     parts.append("</body></html>")
     Path(path).write_text("\n".join(parts))
+
+
+def _candidates_table(iterations: list[dict]) -> str:
+    """Every candidate effect of every iteration with its held-out score (attribution by model comparison,
+    :mod:`simcam.calibration.attribution`)."""
+    if not any(it.get("candidates") for it in iterations):
+        return ""
+    rows = ["<h3>Candidates per iteration (held-out synthetic log-likelihood gain over the current model)</h3>"
+            "<table><tr><th>#</th><th>candidate</th><th>proposed by</th><th>gain (nats)</th><th>± SD</th>"
+            "<th>statistics that moved most</th><th>pixel KL after</th><th>beats current</th><th>chosen</th></tr>"]
+    for i, it in enumerate(iterations, 1):
+        for c in it.get("candidates", []):
+            if "skipped" in c:
+                rows.append(f"<tr><td>{i}</td><td class=l>{c['effect']}</td><td class=l>{', '.join(c['proposed_by'])}</td>"
+                            f"<td colspan=6 class=l>{html.escape(c['skipped'])}</td></tr>")
+                continue
+            moved = ", ".join(f"{m['diagnostic']} {m['gain']:+.3g}" for m in c["moved_most"])
+            rows.append(f"<tr><td>{i}</td><td class=l>{c['effect']}</td><td class=l>{', '.join(c['proposed_by'])}</td>"
+                        f"<td>{_fmt(c['heldout_gain'])}</td><td>{_fmt(c['heldout_gain_sd'])}</td>"
+                        f"<td class=l>{html.escape(moved)}</td><td>{_fmt(c['kl_after'])}</td>"
+                        f"<td>{'yes' if c['beats_current'] else 'no'}</td><td>{'yes' if c['chosen'] else ''}</td></tr>")
+    rows.append("</table>")
+    return "".join(rows)
 
 
 def emva1288_r4_results(capture) -> dict[int, dict]:

@@ -10,7 +10,10 @@ Gaussian (no closed-form density).
 
 Fit. Indirect inference through the full model (quantisation and all): the lam whose simulated dark
 tail mass (``dark_tail_mass``) and PPCC shape (``dark_ppcc_lambda``, Filliben 1975) jointly match the
-data, on a grid over [-0.45, 0.14]; needs darks.
+data, on a grid over [-0.45, 0.14]; needs darks. The fit reads the tail the *rest* of the model leaves,
+so it is repeated whenever another effect joins the model (``refit_on_change``): an effect that also
+makes dark tails (quantisation steps, telegraph pixels, hot pixels' shot noise) would otherwise leave
+the read noise's tail fitted to the part it now explains.
 
 Profile. ``{type: heavy_tail_read, lam, scale}`` with ``scale = read / sqrt(var(TukeyLambda(lam)))``
 on normalised raw, and the base's beta2 = 0 (the read noise moved into the effect); reading it back,
@@ -43,7 +46,8 @@ class HeavyTailRead(EffectParams):
 
 
 class HeavyTailReadCard(DeclaredProfileCard, name="heavy_tail_read", params=HeavyTailRead,
-                        diagnostics=("dark_tail_mass", "dark_ppcc_lambda"), gaussian=False, needs_darks=True):
+                        diagnostics=("dark_tail_mass", "dark_ppcc_lambda"), gaussian=False, needs_darks=True,
+                        refit_on_change=True):
 
     def fit(self, d, model, ctx):
         lam = indirect_fit_joint(d, model, self.name, lambda g: HeavyTailRead(lam=float(g)), list(GRID),
