@@ -24,7 +24,7 @@ dark_checker_jitter     (none)              log of: var over dark frames of the 
                                             (pixel var / pixels)
 col_fpn_excess          column_fpn          cov(column means of even- and odd-frame dark mean maps) /
                                             (map var / H)
-dsnu_excess             dsnu                robust var of the dark mean map (rows/cols removed) /
+dsnu_excess             dsnu                5-sigma-clipped var of the dark mean map (rows/cols removed) /
                                             (temporal var / n)
 hot_pixel_tail          hot_pixels          fraction of pixels whose dark temporal median is
                                             > 6 robust sigma (persistent outliers)
@@ -41,6 +41,11 @@ frame_mean_jitter       frame_flicker       var of flat frame means / signal^2
 dark_tail_mass          heavy_tail_read     fraction of dark residuals beyond 4 IQR-sigma
 dark_ppcc_lambda        heavy_tail_read     Tukey-lambda shape maximising the PPCC of dark residuals
 code_occupancy          quantization        used / possible integer codes in the central 98 % of darks
+code_width_spread       adc_dnl             relative spread of the ADC's code widths: histogram of the
+                                            codes of darks and the dimmest flat (those spread over >= 3
+                                            codes), each code's count against a local quadratic
+                                            through its 6 neighbours, Poisson part taken off
+                                            (IEEE Std 1241-2010 histogram test of DNL)
 lag1_corr / lag2_corr   spatial_correlation lag-1 / lag-2 autocorrelation inside each CFA plane
 glow_field              amp_glow            largest t-value of a smooth field rising to a corner or an
                                             edge in the per-pixel dark slope map (DN/s), darks at
@@ -70,7 +75,7 @@ DIAGNOSTICS = (
     "col_temporal_excess", "dark_checker_jitter", "col_fpn_excess", "dsnu_excess", "hot_pixel_tail", "prnu_excess",
     "black_offset", "dark_signal_slope", "frame_mean_jitter", "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "lag1_corr",
     "lag2_corr", "defect_pixels", "glow_field",
-    "telegraph_pixels",
+    "telegraph_pixels", "code_width_spread",
 )
 
 #: The bootstrap null of the diagnostic on the left is not valid while one on the right is
@@ -105,6 +110,7 @@ NEEDS = {
     "dark_tail_mass": "needs a dark sequence",
     "dark_ppcc_lambda": "needs a dark sequence",
     "code_occupancy": "needs a dark or flat sequence",
+    "code_width_spread": "needs a dark or flat sequence",
     "lag1_corr": "needs a dark sequence",
     "lag2_corr": "needs a dark sequence",
     "defect_pixels": "needs a flat sequence (and darks or a declared black level)",
@@ -222,6 +228,24 @@ def robust_sigma(x: np.ndarray) -> float:
     """1.4826 * MAD (sigma of a Gaussian)."""
     med = np.median(x)
     return float(1.4826 * np.median(np.abs(x - med)))
+
+
+#: half-width of :func:`clipped_variance`'s window, in robust sigmas
+CLIP_SIGMA = 5.0
+
+
+def clipped_variance(x: np.ndarray) -> float:
+    """Variance of the values within :data:`CLIP_SIGMA` robust sigmas (:func:`robust_sigma`; the SD when the
+    MAD is 0) of the median. Outliers (hot pixels) are left out as by the MAD, but unlike the MAD it moves
+    continuously with the spread of coarsely quantised values: the temporal mean of n integer codes sits on a
+    lattice of 1/n DN, where the MAD stays on one lattice step while the spread changes. For a Gaussian it is
+    0.99998 of the variance (5-sigma truncation)."""
+    x = np.asarray(x, dtype=np.float64).ravel()
+    med = float(np.median(x))
+    s = robust_sigma(x)
+    if s <= 0:
+        s = float(np.std(x))
+    return float(np.var(x[np.abs(x - med) <= CLIP_SIGMA * s]))
 
 
 def remove_profiles(m: np.ndarray) -> np.ndarray:
@@ -423,8 +447,7 @@ def dsnu_excess(d: CaptureData):
     if dm is None:
         return None
     m, vt, n = dm
-    r = remove_profiles(m)
-    return _ratio(robust_sigma(r) ** 2, vt / n, "the dark temporal variance")
+    return _ratio(clipped_variance(remove_profiles(m)), vt / n, "the dark temporal variance")
 
 
 def hot_pixel_mask(d: CaptureData) -> np.ndarray | None:
@@ -735,6 +758,77 @@ def code_occupancy(d: CaptureData):
     codes = np.unique(np.round(inside))
     span = codes.max() - codes.min() + 1
     return float(codes.size / span) if span > 1 else 1.0
+
+
+#: neighbours on each side from which a code's smooth expected count is predicted (code_width_spread)
+CODE_HALF_WINDOW = 3
+#: weights of neighbour j (both sides) in the local quadratic's value at the centre: least squares of a
+#: quadratic through the counts at j = +-1, +-2, +-3 gives 1/2 - j^2/14
+CODE_WEIGHTS = np.array([0.5 - j * j / 14.0 for j in (3, 2, 1)] + [0.0] + [0.5 - j * j / 14.0 for j in (1, 2, 3)])
+#: codes whose predicted count is below this are left out (Poisson noise would dominate)
+CODE_MIN_COUNT = 100
+#: fewest codes code_width_spread needs
+CODE_MIN_CODES = 8
+#: a sequence enters the histogram when its values' robust SD spans at least this many codes (narrower
+#: histograms bend too much over the window for a local quadratic)
+CODE_MIN_SPREAD = 3.0
+
+
+def code_histogram(d: CaptureData) -> tuple[np.ndarray, float] | None:
+    """Counts of the ADC codes of the darks and the dimmest flat (the codes a sensor's histogram test uses)
+    whose values spread over :data:`CODE_MIN_SPREAD` codes or more, on the ADC's lattice (the median gap
+    between used codes: a coarser ADC's step), and that step; None without darks or flats."""
+    key = "code_hist"
+    if key in d.cache:
+        return d.cache[key]
+    src = list(d.darks) + sorted(d.flats, key=lambda a: float(a.mean()))[:1]
+    if not src:
+        return None
+    lo = min(float(np.min(s)) for s in src)
+    hi = max(float(np.max(s)) for s in src)
+    per = []
+    for s in src:
+        counts = np.zeros(int(round(hi)) - int(round(lo)) + 1, dtype=np.int64)
+        for f in s:  # one frame at a time: no copy of the whole stack
+            counts += np.bincount((np.round(f).astype(np.int64) - int(round(lo))).ravel(), minlength=counts.size)
+        per.append(counts)
+    total = np.sum(per, axis=0)
+    gaps = np.diff(np.flatnonzero(total))
+    step = int(np.median(gaps)) if gaps.size else 1
+    phase = int(np.argmax(total)) % step
+    out = np.zeros_like(total[phase::step])
+    for counts, s in zip(per, src):
+        sub = s[0][:: max(1, s.shape[1] // 64), :: max(1, s.shape[2] // 64)]  # a spread estimate off a thin grid
+        if robust_sigma(sub - np.median(sub)) >= CODE_MIN_SPREAD * step:
+            out += counts[phase::step]
+    d.cache[key] = (out, float(step))
+    return d.cache[key]
+
+
+def code_width_spread(d: CaptureData):
+    """sum_k ((c_k - s_k)^2 - (1 + sum w^2) s_k) / sum_k s_k^2, c_k a code's count and s_k its count
+    predicted by a local quadratic through its 2 x :data:`CODE_HALF_WINDOW` neighbours on the ADC's lattice
+    (weights :data:`CODE_WEIGHTS`; codes with s_k >= :data:`CODE_MIN_COUNT`): the relative variance of the
+    code widths, weighted by the squared counts (a mean of per-code ratios would be dominated by the
+    few codes whose prediction is small), with the counts' Poisson variance taken off (IEEE Std 1241-2010,
+    sec. 4.1.3, the histogram test of the differential non-linearity)."""
+    h = code_histogram(d)
+    if h is None:
+        return None
+    c = h[0].astype(np.float64)
+    k = CODE_HALF_WINDOW
+    if c.size < 2 * k + 1 or not c.any():
+        raise NotApplicable(f"no dark or flat sequence spreads over {CODE_MIN_SPREAD:g} ADC codes or more")
+    win = np.lib.stride_tricks.sliding_window_view(c, 2 * k + 1)
+    centre = win[:, k]
+    smooth = win @ CODE_WEIGHTS
+    ok = smooth >= CODE_MIN_COUNT
+    if int(ok.sum()) < CODE_MIN_CODES:
+        raise NotApplicable(f"fewer than {CODE_MIN_CODES} ADC codes hold >= {CODE_MIN_COUNT} values in the darks "
+                            f"and the dimmest flat that spread over {CODE_MIN_SPREAD:g} codes or more")
+    cc, ss = centre[ok], smooth[ok]
+    poisson = 1.0 + float(np.sum(CODE_WEIGHTS ** 2))
+    return float(np.sum((cc - ss) ** 2 - poisson * ss) / np.sum(ss ** 2))
 
 
 def _lag_corr(d: CaptureData, lag: int):

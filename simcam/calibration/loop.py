@@ -39,7 +39,7 @@ from ..errors import DatasetError
 from . import diagnostics as dg
 from .attribution import compare
 from .capture import CaptureSet, Sequence
-from .effects import FitContext, card_for, effect_for
+from .effects import FitContext, card_for, effect_for, excluded_by
 from .fit import base_fit, fit_effect
 from .heldout import KL_EDGES, StructuredKL, kl_counts, kl_floor
 from .model import LoopModel, SimSpec, marginal_variance, site_map
@@ -393,6 +393,9 @@ class Loop:
                                    "inflates its spread beyond the simulated one")
                 elif effect in model.effects:
                     unexplained(d, f"{effect} is already in the model and does not explain it")
+                elif excluded_by(effect, model.effects):
+                    unexplained(d, f"{effect} cannot sit beside {excluded_by(effect, model.effects)}, which is "
+                                   "in the model")
                 else:
                     proposals.setdefault(effect, []).append(d)
             if not proposals:

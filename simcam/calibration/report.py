@@ -668,7 +668,8 @@ def _candidates_table(iterations: list[dict]) -> str:
             rows.append(f"<tr><td>{i}</td><td class=l>{c['effect']}</td><td class=l>{', '.join(c['proposed_by'])}</td>"
                         f"<td>{_fmt(c['heldout_gain'])}</td><td>{_fmt(c['heldout_gain_sd'])}</td>"
                         f"<td class=l>{html.escape(moved)}</td><td>{_fmt(c['kl_after'])}</td>"
-                        f"<td>{'yes' if c['beats_current'] else 'no'}</td><td>{'yes' if c['chosen'] else ''}</td></tr>")
+                        f"<td>{'yes' if c['beats_current'] else 'no' if c['kl_ok'] else 'no (pixel KL grew)'}</td>"
+                        f"<td>{'yes' if c['chosen'] else ''}</td></tr>")
     rows.append("</table>")
     return "".join(rows)
 

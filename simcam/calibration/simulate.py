@@ -5,7 +5,8 @@ composite entry of :func:`simcam.calibration.profile.noise_entry` (the one writt
 ``profile.yaml``) plus what the capture's ADC adds to the noise stage's normalised raw:
 
 * per-site black-level differences, as a ``black_level_offset`` (before quantisation);
-* a 1-DN ``quantization`` on the mean black level when the model has none;
+* a 1-DN ``quantization`` on the mean black level when the model has no ADC effect (``quantization``,
+  ``adc_dnl``);
 * DN = normalised * (white - black) + black, clipped to [0, white].
 
 The expected signal a sequence is simulated from is the measured one taken back through the
@@ -29,6 +30,11 @@ from .profile import noise_entry
 FIXED_EFFECTS = tuple(name for name, card in CARDS.items() if card.fixed_pattern)
 
 
+#: the effects that are the capture's ADC (the last step of the chain; the loop adds a 1-DN quantiser when
+#: the model has none of them)
+ADC_EFFECTS = ("quantization", "adc_dnl")
+
+
 def composite_entry(model: LoopModel) -> dict:
     """The profile's composite entry for ``model`` with the capture's ADC (module docstring)."""
     entry, _notes = noise_entry(model)
@@ -43,9 +49,9 @@ def composite_entry(model: LoopModel) -> dict:
         if found:
             found[0]["offset"] = [float(a + b) for a, b in zip(found[0]["offset"], site)]
         else:
-            at = next((i for i, e in enumerate(effects) if e["type"] == "quantization"), len(effects))
+            at = next((i for i, e in enumerate(effects) if e["type"] in ADC_EFFECTS), len(effects))
             effects.insert(at, {"type": "black_level_offset", "offset": [float(x) for x in site]})
-    if not any(e["type"] == "quantization" for e in effects):
+    if not any(e["type"] in ADC_EFFECTS for e in effects):
         effects.append({"type": "quantization", "range_dn": float(fs), "step_dn": 1.0, "offset_dn": float(black.mean())})
     return {"type": "composite", "base": entry["base"], "effects": effects}
 

@@ -11,7 +11,7 @@ seed eq. 3.6 for the Poisson-Gaussian core)::
     x      = K * g[c] * e + read[f, p] + row[f, r] + periodic[f, r]     DN, linear
     y      = x + c_nl * x**2 / (white - black)                          compressive response
     v      = black + offset + dsnu[p] + col[c] + hot[p] + y
-    frame  = clip(round(v / q) * q, 0, 2**bits - 1)                     ADC
+    frame  = clip(round(v / q) * q, 0, 2**bits - 1)                     ADC (or adc_dnl's codes)
 
 * ``K`` system gain (DN/e-), ``g[c]`` per-CFA-site gain (``channel_gain``).
 * ``read`` Gaussian N(0, read_dn^2), or Tukey-lambda(lam) scaled to the same
@@ -34,6 +34,8 @@ seed eq. 3.6 for the Poisson-Gaussian core)::
   log-normal about ``amplitude_dn`` (spread ``log_sigma``), added to ``x`` in the frames where the
   pixel's trap is in its high state (probability ``p_high``, independently per frame): random
   telegraph noise.
+* ``adc_dnl``: the ADC's transition levels ``k + 1/2 + u_k``, ``u_k ~ N(0, dnl_sigma^2)`` LSB drawn once per
+  sensor (sorted), instead of rounding: codes of unequal width (differential non-linearity).
 * ``column_noise`` N(0, s^2) per frame and column: deliberately *outside* simcam's effect
   vocabulary (temporal column noise), to test that the loop reports it as unexplained.
 * ``checker_offset`` N(0, s^2) per frame, added with opposite signs to the 00/11 and the 01/10
@@ -52,7 +54,7 @@ EFFECTS = (
     "row_noise", "column_fpn", "dsnu", "prnu", "hot_pixels", "heavy_tail_read", "quantization",
     "spatial_correlation", "periodic_pattern", "black_level_offset", "frame_flicker",
     "nonlinearity", "channel_gain", "dark_current", "dead_pixels", "amp_glow",
-    "rtn",
+    "rtn", "adc_dnl",
 )
 
 #: Parameters the tests use for each effect alone (chosen well above the
@@ -75,6 +77,7 @@ DEFAULT_EFFECTS = {
     "dead_pixels": {"dead_fraction": 0.004, "stuck_fraction": 0.002},
     "rtn": {"fraction": 0.015, "amplitude_dn": 20.0, "log_sigma": 0.3, "p_high": 0.4},
     "amp_glow": {"rate_e_per_s": 40.0, "origin": "top_right", "scale": 0.2},
+    "adc_dnl": {"dnl_sigma": 0.2},
 }
 
 
@@ -182,6 +185,10 @@ class HiddenEffectSensor:
             self.rtn_idx = np.flatnonzero(rng.random((h, w)) < p["fraction"])
             s = p.get("log_sigma", 0.0)
             self.rtn_amp = p["amplitude_dn"] * np.exp(s * rng.standard_normal(self.rtn_idx.size) - s * s / 2)
+        self.adc_edges = None
+        if "adc_dnl" in spec.effects:  # transition levels off their ideal places, drawn once (sorted: no overlap)
+            n = 2 ** spec.bits
+            self.adc_edges = np.sort(np.arange(n - 1) + 0.5 + rng.normal(0, spec.effects["adc_dnl"]["dnl_sigma"], n - 1))
 
     def frames(self, mu_e: np.ndarray | float, n_frames: int, rng, exposure_s: float = 0.01) -> np.ndarray:
         """``n_frames`` x H x W frames in DN (float32 holding integer codes) at ``exposure_s`` seconds."""
@@ -224,7 +231,10 @@ class HiddenEffectSensor:
                 x = x + eff["nonlinearity"]["c"] * x ** 2 / (s.white_dn - s.black_dn)
             v = s.black_dn + eff.get("black_level_offset", {}).get("offset_dn", 0.0) + self.offset + x
             q = eff.get("quantization", {}).get("step_dn", 1)
-            out[f] = np.clip(np.round(v / q) * q, 0, s.white_dn)
+            if self.adc_edges is not None:  # code k spans [edges[k-1], edges[k])
+                out[f] = np.clip(np.searchsorted(self.adc_edges, v, side="right"), 0, s.white_dn)
+            else:
+                out[f] = np.clip(np.round(v / q) * q, 0, s.white_dn)
             if self.stuck is not None:
                 out[f][self.stuck] = s.white_dn
         return out

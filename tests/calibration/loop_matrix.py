@@ -23,6 +23,7 @@ PAIRS = (
     ("rtn", "hot_pixels"),
     ("rtn", "heavy_tail_read"),
     ("dark_current", "amp_glow"),
+    ("adc_dnl", "heavy_tail_read"),
 )
 CASES = ((),) + tuple((e,) for e in EFFECTS) + PAIRS
 

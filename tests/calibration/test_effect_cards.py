@@ -13,6 +13,7 @@ from loop_generator import DEFAULT_EFFECTS, EFFECTS, SensorSpec, capture_set
 from loop_matrix import in_memory_capture
 from simcam.calibration import diagnostics as dg
 from simcam.calibration.effects import CARDS, DIAGNOSTIC_EFFECT, EffectCard, EffectParams, Fit, FitContext, card_for
+from simcam.calibration.effects.adc_dnl import AdcDnl
 from simcam.calibration.effects.amp_glow import AmpGlow
 from simcam.calibration.effects.black_level_offset import BlackLevelOffset
 from simcam.calibration.effects.channel_gain import ChannelGain
@@ -54,6 +55,7 @@ EXAMPLES = {
     "rtn": Rtn(fraction=0.008, amplitude_dn=20.0, amplitude_log_sigma=0.3, p_high=0.35, count=20),
     "black_level_offset": BlackLevelOffset(offset_dn=[6.0, 5.5, 6.5, 6.0]),
     "quantization": Quantization(step_dn=4.0),
+    "adc_dnl": AdcDnl(dnl_sigma=0.2),
 }
 #: diagnostics that by design propose no effect (outside the vocabulary)
 UNATTRIBUTED = {"col_temporal_excess", "dark_checker_jitter"}

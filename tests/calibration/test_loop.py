@@ -27,7 +27,7 @@ def test_base_only_adds_nothing():
 
 
 @pytest.mark.parametrize("effect", ["row_noise", "column_fpn", "quantization", "black_level_offset", "channel_gain",
-                                    "dead_pixels", "rtn", "amp_glow"])
+                                    "dead_pixels", "rtn", "amp_glow", "adc_dnl"])
 def test_single_effect_is_named(effect):
     r = run_case((effect,))
     assert list(r.model.effects) == [effect]
@@ -103,6 +103,12 @@ def test_cli_end_to_end_and_heldout_kl_drop(tmp_path):
                                       "kl_excess_after", "kl_structured_before", "kl_structured_after",
                                       "structured_before", "structured_after"}
         assert set(it["heldout"]["structured_after"]) == {"pixel", "row", "column", "temporal", "block", "frame"}
+        # every candidate of the iteration with its held-out score; the added one is the best that beats the model
+        chosen = [c for c in it["candidates"] if c["chosen"]]
+        assert [c["effect"] for c in chosen] == [it["effect"]]
+        scored = [c for c in it["candidates"] if "heldout_gain" in c]
+        assert chosen[0]["heldout_gain"] == max(c["heldout_gain"] for c in scored)
+        assert it["heldout"]["gain"] > 2 * it["heldout"]["gain_sd"]
     assert set(doc["emva"]) == {"K_dn_per_e", "sigma_dark_e", "dsnu_e", "prnu_percent"}
     # held-out marginal KL drops by >= 80 % from the base fit
     assert g["heldout"]["kl_final"] <= 0.2 * g["heldout"]["kl_base"]
@@ -120,6 +126,7 @@ def test_cli_end_to_end_and_heldout_kl_drop(tmp_path):
     # photon transfer, spectra, maps, residual histograms, and the EMVA 1288 R4.0 plots
     assert html.count("data:image/png;base64,") == 5
     assert "EMVA 1288 Release 4.0" in html and "System gain K" in html
+    assert "Candidates per iteration" in html
     # starting from the written model, nothing is left to add
     out2 = tmp_path / "out2"
     assert main(["loop", str(cap), "--out", str(out2), "--start-profile", str(out / "loop_model.yaml")]) == 0

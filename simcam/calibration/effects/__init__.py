@@ -16,11 +16,11 @@ from .. import diagnostics as _dg
 from . import (black_level_offset, channel_gain, column_fpn, dark_current, dead_pixels, dsnu, frame_flicker,
                heavy_tail_read, hot_pixels,
                nonlinearity, periodic_pattern, prnu, quantization, row_noise, spatial_correlation)
-from . import amp_glow, rtn
+from . import adc_dnl, amp_glow, rtn
 from .card import EffectCard, EffectParams, Fit, FitContext, ProfileTerm
 
 __all__ = ["CARDS", "DIAGNOSTIC_EFFECT", "EffectCard", "EffectParams", "Fit", "FitContext", "ProfileTerm",
-           "card_for", "effect_for", "params_from_dict"]
+           "card_for", "effect_for", "excluded_by", "params_from_dict"]
 
 #: name -> card, in signal-chain order (the order of the noise stage's composite entry): effects on
 #: the signal (before photon counting / the gain), then readout effects, the response, fixed offsets,
@@ -43,6 +43,7 @@ CARDS: dict[str, EffectCard] = {c.name: c for c in (
     dead_pixels.DeadPixelsCard(),
     black_level_offset.BlackLevelOffsetCard(),
     quantization.QuantizationCard(),
+    adc_dnl.AdcDnlCard(),
 )}
 
 
@@ -60,6 +61,32 @@ def _diagnostic_effect() -> dict[str, str | None]:
 
 #: diagnostic -> the effect it proposes (from the cards' ``diagnostics``); None: no effect of the vocabulary
 DIAGNOSTIC_EFFECT: dict[str, str | None] = _diagnostic_effect()
+
+
+def excluded_by(name: str, effects) -> str | None:
+    """The effect of ``effects`` that effect ``name`` cannot sit beside (either card's ``excludes``), or None.
+
+    Parameters
+    ----------
+    name : str
+        An effect of the loop's vocabulary.
+    effects : iterable of str
+        The effects already in a model.
+
+    Returns
+    -------
+    str or None
+        The first of ``effects`` that excludes ``name`` or that ``name`` excludes.
+
+    Examples
+    --------
+    >>> excluded_by("adc_dnl", ["dsnu", "quantization"]), excluded_by("dsnu", ["quantization"])
+    ('quantization', None)
+    """
+    for other in effects:
+        if other in CARDS[name].excludes or name in CARDS[other].excludes:
+            return other
+    return None
 
 
 def card_for(name: str) -> EffectCard:

@@ -242,6 +242,8 @@ class EffectCard:
         How the loop treats it (see the class attributes' comments).
     refit_after : tuple of str
         Effects whose addition makes the loop refit it.
+    excludes : tuple of str
+        Effects it cannot sit beside (either way round).
     marginal_rank : int or None
         Position of its term in the closed-form marginal variance.
     null_field, null_value : str or None, float
@@ -278,6 +280,9 @@ class EffectCard:
     refit_on_change: ClassVar[bool] = False
     #: effects whose addition changes its estimate: it is refitted when one of them is added
     refit_after: ClassVar[tuple[str, ...]] = ()
+    #: effects it cannot sit beside (it replaces them: ``adc_dnl`` is the model's ADC instead of
+    #: ``quantization``); it is not proposed while one of them is in the model, nor they while it is
+    excludes: ClassVar[tuple[str, ...]] = ()
     #: the parameter whose zero makes the effect the identity (:meth:`is_null`; None: no such parameter)
     null_field: ClassVar[str | None] = None
     #: the value of ``null_field`` that makes the effect the identity
