@@ -40,7 +40,7 @@ import numpy as np
 from scipy import stats as sst
 
 #: a candidate is added when its held-out gain exceeds GAIN_Z jackknife standard errors ...
-GAIN_Z = 2.0
+GAIN_Z = 3.0
 #: ... and MIN_GAIN nats (a gain of one nat is a likelihood ratio of e on one capture's statistics)
 MIN_GAIN = 2.0
 

@@ -47,6 +47,7 @@ code_width_spread       adc_dnl             relative spread of the ADC's code wi
                                             through its 6 neighbours, Poisson part taken off
                                             (IEEE Std 1241-2010 histogram test of DNL)
 lag1_corr / lag2_corr   spatial_correlation lag-1 / lag-2 autocorrelation inside each CFA plane
+adjacent_corr           spatial_correlation lag-1 autocorrelation on the mosaic (adjacent pixels)
 glow_field              amp_glow            largest t-value of a smooth field rising to a corner or an
                                             edge in the per-pixel dark slope map (DN/s), darks at
                                             every exposure time (:func:`glow_field`)
@@ -75,7 +76,7 @@ DIAGNOSTICS = (
     "col_temporal_excess", "dark_checker_jitter", "col_fpn_excess", "dsnu_excess", "hot_pixel_tail", "prnu_excess",
     "black_offset", "dark_signal_slope", "frame_mean_jitter", "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "lag1_corr",
     "lag2_corr", "defect_pixels", "glow_field",
-    "telegraph_pixels", "code_width_spread",
+    "telegraph_pixels", "code_width_spread", "adjacent_corr",
 )
 
 #: The bootstrap null of the diagnostic on the left is not valid while one on the right is
@@ -113,6 +114,7 @@ NEEDS = {
     "code_width_spread": "needs a dark or flat sequence",
     "lag1_corr": "needs a dark sequence",
     "lag2_corr": "needs a dark sequence",
+    "adjacent_corr": "needs a dark sequence",
     "defect_pixels": "needs a flat sequence (and darks or a declared black level)",
     "telegraph_pixels": "needs a dark sequence",
     "glow_field": "needs darks at >= 2 exposure times",
@@ -861,6 +863,28 @@ def lag1_corr(d):
 
 def lag2_corr(d):
     return _lag_corr(d, 2)
+
+
+def adjacent_corr(d: CaptureData):
+    """Lag-1 autocorrelation of the dark temporal residuals on the mosaic (adjacent pixels, of different
+    colours on a CFA sensor), along rows and along columns, each frame's row and column means removed:
+    electrical crosstalk between neighbouring lines couples adjacent pixels, which the in-plane statistics
+    (:func:`lag1_corr`, same-colour pixels 2 px apart) do not see."""
+    res = d.temporal_residuals("dark")
+    if not res:
+        return None
+    vals = []
+    for r in res:
+        r = r - r.mean(axis=2, keepdims=True)
+        r = r - r.mean(axis=1, keepdims=True)
+        den = float(np.mean(r * r))
+        if den <= 0:
+            raise NotApplicable("the dark residual's variance is 0 (quantisation-dominated darks)")
+        if r.shape[1] < 2 or r.shape[2] < 2:
+            raise NotApplicable("the frame is narrower than 2 pixels")
+        vals.append(float(np.mean(r[:, :, 1:] * r[:, :, :-1])) / den)
+        vals.append(float(np.mean(r[:, 1:, :] * r[:, :-1, :])) / den)
+    return float(np.mean(vals))
 
 
 def dark_signal_slope(d: CaptureData):

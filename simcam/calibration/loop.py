@@ -24,6 +24,9 @@ Per ISO group of a capture set:
    relative plus twice its sampling floor (:func:`simcam.calibration.heldout.kl_floor`); the
    structured marginal KL of aggregated noise (:mod:`simcam.calibration.heldout`) and the NLL/dim of
    the model's Gaussian marginal are reported before and after, with every candidate's score.
+   Candidates whose gains differ by less than twice their combined standard errors cannot be told
+   apart by the held-out frames; of those, one the sensor's previous ISO groups added is taken (a hot
+   pixel saturated at a high ISO reads as a stuck one there).
    When no candidate beats the current model, the proposing diagnostics are ``unexplained`` with the
    candidates' scores as the reason, and the loop stops (also when nothing significant is left, or
    after ``max_iterations``).
@@ -243,8 +246,10 @@ def _summary(held: dict) -> dict:
 class Loop:
     """Runs the loop on one ISO group."""
 
-    def __init__(self, group: Group, cfg: LoopConfig, iso: int):
+    def __init__(self, group: Group, cfg: LoopConfig, iso: int, preferred=()):
         self.g, self.cfg, self.iso = group, cfg, iso
+        #: effects added at the sensor's other ISOs: taken where the held-out frames cannot tell candidates apart
+        self.preferred = set(preferred)
         #: diagnostic -> why it is not applicable (on the data, or on the simulated captures)
         self.not_applicable: dict[str, str] = {}
         self.data_stats = dg.compute_all(group.fit_data, reasons=self.not_applicable)
@@ -404,6 +409,17 @@ class Loop:
             tried = [self._candidate(effect, ds, model, tag, held_cur) for effect, ds in proposals.items()]
             scored = [t for t in tried if t[1] is not None]
             best = max(scored, key=lambda t: t[0]["heldout_gain"]) if scored else None
+            if best is not None and self.preferred:
+                # candidates the held-out frames cannot tell apart from the best: one the sensor's other ISOs
+                # added is taken (a hot pixel saturated at a high ISO reads as a stuck one there)
+                def tied(t):
+                    a, b = best[0], t[0]
+                    return a["heldout_gain"] - b["heldout_gain"] <= 2 * np.hypot(a["heldout_gain_sd"],
+                                                                                 b["heldout_gain_sd"])
+                pref = [t for t in scored if t[0]["effect"] in self.preferred and tied(t)]
+                if pref and best[0]["effect"] not in self.preferred:
+                    best = max(pref, key=lambda t: t[0]["heldout_gain"])
+                    best[0]["tie_broken_by"] = "added at another ISO of this sensor"
             for rec, _c, _h in tried:
                 rec["chosen"] = best is not None and rec is best[0]
             if best is None:  # no candidate could be fitted: each proposing diagnostic says why
@@ -483,7 +499,7 @@ def run_loop(capture: CaptureSet, cfg: LoopConfig | None = None,
 
             raise ProfileError(f"--start-profile: ISO {iso}: cfa {start.cfa!r} / white level {start.white_dn:g} DN "
                                f"do not match the capture set ({group.cfa!r} / {group.white:g} DN)")
-        res = Loop(group, cfg, iso).run(start)
+        res = Loop(group, cfg, iso, preferred={e for r in out for e in r.model.effects}).run(start)
         res.notes = [n for n in capture.notes if n.startswith(f"ISO {iso}:") or not n.startswith("ISO ")] + notes
         res.plots["group"] = group
         out.append(res)

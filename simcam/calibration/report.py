@@ -665,11 +665,13 @@ def _candidates_table(iterations: list[dict]) -> str:
                             f"<td colspan=6 class=l>{html.escape(c['skipped'])}</td></tr>")
                 continue
             moved = ", ".join(f"{m['diagnostic']} {m['gain']:+.3g}" for m in c["moved_most"])
+            chosen = ("" if not c["chosen"] else
+                      f"yes (tied: {html.escape(c['tie_broken_by'])})" if c.get("tie_broken_by") else "yes")
             rows.append(f"<tr><td>{i}</td><td class=l>{c['effect']}</td><td class=l>{', '.join(c['proposed_by'])}</td>"
                         f"<td>{_fmt(c['heldout_gain'])}</td><td>{_fmt(c['heldout_gain_sd'])}</td>"
                         f"<td class=l>{html.escape(moved)}</td><td>{_fmt(c['kl_after'])}</td>"
                         f"<td>{'yes' if c['beats_current'] else 'no' if c['kl_ok'] else 'no (pixel KL grew)'}</td>"
-                        f"<td>{'yes' if c['chosen'] else ''}</td></tr>")
+                        f"<td>{chosen}</td></tr>")
     rows.append("</table>")
     return "".join(rows)
 

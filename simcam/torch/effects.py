@@ -144,15 +144,17 @@ def heavy_tail_read(group: Group, x, ctx: Ctx, st: EffectState):
     return x + add
 
 
-def plane_filter(n: torch.Tensor, c: torch.Tensor) -> torch.Tensor:
-    """Variance-preserving separable ``[c, 1, c]`` filter inside each CFA plane (same-colour pixels 2 px apart;
-    borders reflected about each plane's edge pixel); ``c`` broadcasts as ``[G, 1, 1, 1]``."""
+def plane_filter(n: torch.Tensor, c: torch.Tensor, stride: int = 2) -> torch.Tensor:
+    """Variance-preserving separable ``[c, 1, c]`` filter inside each CFA plane (same-colour pixels ``stride`` = 2
+    px apart; 1: on the mosaic, adjacent pixels; borders reflected about each plane's edge pixel); ``c``
+    broadcasts as ``[G, 1, 1, 1]``."""
     out = n
     h, w = n.shape[-2:]
-    p = F.pad(out, (0, 0, 2, 2), mode="reflect")
-    out = out + c * (p[..., 0:h, :] + p[..., 4:h + 4, :])
-    p = F.pad(out, (2, 2, 0, 0), mode="reflect")
-    out = out + c * (p[..., :, 0:w] + p[..., :, 4:w + 4])
+    k = stride
+    p = F.pad(out, (0, 0, k, k), mode="reflect")
+    out = out + c * (p[..., 0:h, :] + p[..., 2 * k:h + 2 * k, :])
+    p = F.pad(out, (k, k, 0, 0), mode="reflect")
+    out = out + c * (p[..., :, 0:w] + p[..., :, 2 * k:w + 2 * k])
     return out / (1.0 + 2.0 * c * c)
 
 
@@ -161,7 +163,7 @@ def spatial_correlation(group: Group, x, ctx: Ctx, st: EffectState):
     if not np.any(cs):
         return x
     c = ctx.scalar(group, lambda e: e.coefficient)
-    f = plane_filter(st.read, c)
+    f = plane_filter(st.read, c, 2 if group.models[0].neighbours == "same_colour" else 1)
     x = x + (f - st.read)
     st.read = f
     return x

@@ -17,7 +17,7 @@ seed eq. 3.6 for the Poisson-Gaussian core)::
 * ``read`` Gaussian N(0, read_dn^2), or Tukey-lambda(lam) scaled to the same
   variance (``heavy_tail_read``; ELD, Wei et al. CVPR 2020), optionally
   filtered inside each CFA plane by the separable kernel [a, 1, a]
-  (``spatial_correlation``), renormalised to keep its variance.
+  (``spatial_correlation``; with ``neighbours: adjacent``, on the mosaic), renormalised to keep its variance.
 * ``row`` N(0, sigma^2) per frame and row (``row_noise``); ``periodic`` a sine
   along the row index with a random phase per frame (``periodic_pattern``).
 * Fixed patterns are drawn once per sensor (``sensor_seed``) and shared by all
@@ -118,11 +118,12 @@ def _tukey_var(lam: float) -> float:
     return 2.0 / lam ** 2 * (1.0 / (1 + 2 * lam) - gamma(lam + 1) ** 2 / gamma(2 * lam + 2))
 
 
-def _plane_filter(noise: np.ndarray, a: float) -> np.ndarray:
-    """Separable [a, 1, a] filter inside each 2x2 CFA plane (circular), unit variance gain."""
+def _plane_filter(noise: np.ndarray, a: float, step: int = 2) -> np.ndarray:
+    """Separable [a, 1, a] filter inside each 2x2 CFA plane (circular), unit variance gain; ``step`` 1: on the
+    mosaic (adjacent pixels)."""
     out = noise.copy()
     for axis in (-2, -1):
-        out = out + a * (np.roll(out, 2, axis=axis) + np.roll(out, -2, axis=axis))
+        out = out + a * (np.roll(out, step, axis=axis) + np.roll(out, -step, axis=axis))
     return out / (1 + 2 * a * a)
 
 
@@ -212,7 +213,8 @@ class HiddenEffectSensor:
             else:
                 read = rng.standard_normal((h, w))
             if "spatial_correlation" in eff:
-                read = _plane_filter(read, eff["spatial_correlation"]["a"])
+                sc = eff["spatial_correlation"]
+                read = _plane_filter(read, sc["a"], 1 if sc.get("neighbours") == "adjacent" else 2)
             x = x + s.read_dn * read
             if self.rtn_idx is not None:  # each trap in its high state with probability p_high, every frame
                 high = rng.random(self.rtn_idx.size) < eff["rtn"]["p_high"]

@@ -32,21 +32,21 @@ def test_no_gain_between_identical_models():
 
 
 def test_gain_is_the_log_density_difference_and_names_the_statistic_that_moved():
-    """Current model misses one statistic by 6 of its SDs, the candidate centres it; the other statistics
+    """Current model misses one statistic by 10 of its SDs, the candidate centres it; the other statistics
     are the same draws in both (common random numbers): the gain is exactly the t log-density difference
     of the one that moved, and its jackknife SE comes from that statistic's replicates alone."""
     rng = np.random.default_rng(2)
     base = rng.normal(size=8)
     cur = {"moved": list(base), "same": list(rng.normal(size=8))}
-    cand = {"moved": list(base + 6.0), "same": cur["same"]}
-    values = {"moved": 6.0 + base.mean(), "same": 0.1}
+    cand = {"moved": list(base + 10.0), "same": cur["same"]}
+    values = {"moved": 10.0 + base.mean(), "same": 0.1}
     floors = {"moved": 0.0, "same": 0.0}
     c = compare(values, floors, cur, cand)
     expect = t_logpdf(values["moved"], np.asarray(cand["moved"]), 0.0) - t_logpdf(values["moved"], base, 0.0)
     assert c.gain == pytest.approx(expect, rel=1e-12)
     assert c.per_diagnostic["same"] == 0.0 and c.top(1)[0][0] == "moved"
     # leave-one-out by hand
-    loo = [t_logpdf(values["moved"], np.delete(base + 6.0, r), 0.0) - t_logpdf(values["moved"], np.delete(base, r), 0.0)
+    loo = [t_logpdf(values["moved"], np.delete(base + 10.0, r), 0.0) - t_logpdf(values["moved"], np.delete(base, r), 0.0)
            for r in range(8)]
     sd = math.sqrt(7 / 8 * sum((x - np.mean(loo)) ** 2 for x in loo))
     assert c.sd == pytest.approx(sd, rel=1e-12)

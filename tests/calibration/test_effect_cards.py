@@ -186,7 +186,8 @@ def test_read_noise_bookkeeping_and_marginal_variance():
 def _fit_data(name: str, seed: int = 3):
     from simcam.calibration.loop import Group, LoopConfig
 
-    spec = SensorSpec(height=32, width=32, effects={name: DEFAULT_EFFECTS[name]})
+    side = 64 if name == "adc_dnl" else 32  # the histogram test needs >= 8 codes holding >= 100 values
+    spec = SensorSpec(height=side, width=side, effects={name: DEFAULT_EFFECTS[name]})
     cs = in_memory_capture(capture_set(spec, n_frames=8, seed=seed))
     return Group(cs.group(800), LoopConfig(), [])
 

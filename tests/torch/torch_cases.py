@@ -34,6 +34,9 @@ EFFECT_CASES = {
     "quantization": [{"type": "quantization", "range_dn": 200.0, "step_dn": 2.0, "offset_dn": 16.3}],
     "spatial_correlation": [{"type": "heavy_tail_read", "lam": 0.0, "scale": 0.002},
                             {"type": "spatial_correlation", "coefficient": 0.3}],
+    # the same kernel on the mosaic: adjacent, different-colour neighbours correlate (what simcam loop fits
+    # from adjacent_corr)
+    "spatial_correlation_adjacent": [{"type": "spatial_correlation", "coefficient": 0.2, "neighbours": "adjacent"}],
     "periodic_pattern": [{"type": "periodic_pattern", "amplitude": 0.004, "period_px": 7.0, "axis": "columns"},
                          {"type": "periodic_pattern", "amplitude": 0.003, "period_px": 5.0, "axis": "rows",
                           "random_phase": False, "phase": 0.7}],

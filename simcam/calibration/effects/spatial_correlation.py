@@ -1,4 +1,4 @@
-"""``spatial_correlation``: crosstalk of the read noise between same-colour neighbours.
+"""``spatial_correlation``: crosstalk of the read noise between same-colour (or adjacent) neighbours.
 
 Physics. Shared readout circuitry and electrical crosstalk couple the read noise of neighbouring
 pixels of one CFA plane: the noise stage filters it inside each plane with the separable kernel
@@ -27,14 +27,27 @@ GRID = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5)
 
 
 class SpatialCorrelation(EffectParams):
-    a: float = quantity("", "coupling of the in-plane [a, 1, a] kernel of the read noise (dimensionless, 0 to 0.5)",
+    a: float = quantity("", "coupling of the [a, 1, a] kernel of the read noise (dimensionless, 0 to 0.5)",
                         profile="coefficient")
+    neighbours: str = quantity("", "which neighbours the kernel couples: same_colour (inside each CFA plane) or "
+                               "adjacent (on the mosaic)", scale=None, default="same_colour")
 
 
 class SpatialCorrelationCard(DeclaredProfileCard, name="spatial_correlation", params=SpatialCorrelation, null_field="a",
-                             diagnostics=("lag1_corr", "lag2_corr"), needs_darks=True):
+                             diagnostics=("lag1_corr", "lag2_corr", "adjacent_corr"), needs_darks=True):
 
     def fit(self, d, model, ctx):
-        a = indirect_fit(d, model, self.name, lambda g: SpatialCorrelation(a=float(g)), list(GRID), "lag1_corr",
-                         ctx.dark_specs, ctx.seed, ctx.simulate)
-        return SpatialCorrelation(a=float(np.clip(a, 0.0, 0.5)))
+        hood = "adjacent" if ctx.diagnostic == "adjacent_corr" else "same_colour"
+        a = indirect_fit(d, model, self.name, lambda g: SpatialCorrelation(a=float(g), neighbours=hood), list(GRID),
+                         "adjacent_corr" if hood == "adjacent" else "lag1_corr", ctx.dark_specs, ctx.seed,
+                         ctx.simulate)
+        return SpatialCorrelation(a=float(np.clip(a, 0.0, 0.5)), neighbours=hood)
+
+    def to_profile(self, p, model):
+        term = super().to_profile(p, model)
+        if p.neighbours != "same_colour":
+            term.effect["neighbours"] = p.neighbours
+        return term
+
+    def from_profile(self, entry, full_scale_dn):
+        return SpatialCorrelation(a=float(entry["coefficient"]), neighbours=str(entry.get("neighbours", "same_colour")))

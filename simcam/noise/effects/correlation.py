@@ -1,4 +1,5 @@
-"""``spatial_correlation``: crosstalk of the read noise between same-colour neighbours (inside each CFA plane).
+"""``spatial_correlation``: crosstalk of the read noise between same-colour neighbours (inside each CFA plane),
+or, with ``neighbours: adjacent``, between adjacent pixels of the mosaic.
 
 Physics. The correlation the calibration loop measures is that of dark-frame
 temporal noise between same-colour neighbours (2 px apart on the mosaic) with
@@ -39,21 +40,22 @@ from pydantic import Field
 from .base import Effect, register_effect
 
 
-def plane_filter(n: np.ndarray, c: float) -> np.ndarray:
+def plane_filter(n: np.ndarray, c: float, stride: int = 2) -> np.ndarray:
     """Variance-preserving separable ``[c, 1, c]`` filter inside each CFA plane of ``n`` (..., H, W).
 
-    Same-colour neighbours are 2 px apart; rows/columns beyond the border are
-    reflected about the plane's edge pixel (numpy ``reflect`` padding by 2 px).
+    Same-colour neighbours are ``stride`` = 2 px apart; ``stride`` = 1 filters the mosaic itself (adjacent,
+    different-colour neighbours). Rows/columns beyond the border are reflected about the plane's edge
+    pixel (numpy ``reflect`` padding by ``stride`` px).
     """
     c32 = np.float32(c)
     out = np.asarray(n, dtype=np.float32)
     for axis in (-2, -1):
         pad = [(0, 0)] * out.ndim
-        pad[axis] = (2, 2)
+        pad[axis] = (stride, stride)
         p = np.pad(out, pad, mode="reflect")
         size = out.shape[axis]
         lo = np.take(p, np.arange(0, size), axis=axis)
-        hi = np.take(p, np.arange(4, size + 4), axis=axis)
+        hi = np.take(p, np.arange(2 * stride, size + 2 * stride), axis=axis)
         out = out + c32 * (lo + hi)
     return out * np.float32(1.0 / (1.0 + 2.0 * c * c))
 
@@ -71,12 +73,16 @@ class SpatialCorrelation(Effect):
 
     type: Literal["spatial_correlation"] = "spatial_correlation"
     coefficient: float = Field(ge=-0.5, le=0.5)
+    #: ``same_colour``: the in-plane kernel (same-colour neighbours 2 px apart); ``adjacent``: the same kernel on
+    #: the mosaic (adjacent, different-colour neighbours correlate 2 c / (1 + 2 c^2), same-colour ones 2 px
+    #: apart c^2 / (1 + 2 c^2)), as electrical crosstalk between neighbouring column or row lines gives
+    neighbours: Literal["same_colour", "adjacent"] = "same_colour"
     needs_read = True
 
     def apply(self, x, ctx):
         if self.coefficient == 0:
             return x
-        f = plane_filter(ctx.read, float(self.coefficient))
+        f = plane_filter(ctx.read, float(self.coefficient), 2 if self.neighbours == "same_colour" else 1)
         x += f - ctx.read  # x = shot + read -> shot + filtered read
         ctx.read[...] = f
         return x
