@@ -25,7 +25,7 @@ dark_checker_jitter     (none)              log of: var over dark frames of the 
 col_fpn_excess          column_fpn          cov(column means of even- and odd-frame dark mean maps) /
                                             (map var / H)
 dsnu_excess             dsnu                5-sigma-clipped var of the dark mean map (rows/cols removed) /
-                                            (temporal var / n)
+                                            (temporal var with rows/cols removed / n)
 hot_pixel_tail          hot_pixels          fraction of pixels whose dark temporal median is
                                             > 6 robust sigma (persistent outliers)
 telegraph_pixels        rtn                 fraction of pixels whose dark frames sit on two levels
@@ -148,6 +148,12 @@ class CaptureData:
     cache: dict = field(default_factory=dict)
     dark_series: list | None = None
 
+    def profile_free_dark_variance(self) -> float:
+        """:func:`profile_free_temporal_variance` of the darks (cached)."""
+        if "pf_var" not in self.cache:
+            self.cache["pf_var"] = profile_free_temporal_variance(self.darks)
+        return self.cache["pf_var"]
+
     def like(self, frames: list, specs: list) -> "CaptureData":
         """A capture with this one's structure (black, white, CFA) holding ``frames``, one (n, H, W) stack
         per sequence of ``specs`` (``SimSpec``: kind; a scene's clean reference is its ``signal_dn``
@@ -248,6 +254,45 @@ def clipped_variance(x: np.ndarray) -> float:
     if s <= 0:
         s = float(np.std(x))
     return float(np.var(x[np.abs(x - med) <= CLIP_SIGMA * s]))
+
+
+def profile_free_temporal_variance(darks) -> float:
+    """Temporal variance per pixel (DN^2) of dark sequences ``(n, H, W)`` once each frame's deviation
+    from its sequence mean has lost its per-plane, per-row and per-column means: the temporal noise
+    that is still in a mean map after :func:`~simcam.calibration.diagnostics.remove_profiles`.
+
+    Parameters
+    ----------
+    darks : sequence of ndarray
+        Dark sequences, each ``(n, H, W)`` with n >= 2 (DN).
+
+    Returns
+    -------
+    float
+        Pooled over the sequences (weights n - 1).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> white = rng.normal(0, 2.0, (8, 64, 64))
+    >>> rows = rng.normal(0, 3.0, (8, 64, 1))  # row noise: shared along each row
+    >>> round(profile_free_temporal_variance([white + rows]), 1)  # only the white part is left
+    3.9
+    """
+    num = dof = 0.0
+    for seq in darks:
+        e = np.asarray(seq, dtype=np.float64)
+        if e.shape[0] < 2:
+            continue
+        e = e - e.mean(0)
+        for dy, dx in PLANE_OFFSETS:
+            e[:, dy::2, dx::2] -= e[:, dy::2, dx::2].mean(axis=(1, 2), keepdims=True)
+        e -= e.mean(axis=2, keepdims=True)
+        e -= e.mean(axis=1, keepdims=True)
+        num += float(np.sum(e * e)) / (e.shape[1] * e.shape[2])
+        dof += e.shape[0] - 1
+    return num / dof if dof else 0.0
 
 
 def remove_profiles(m: np.ndarray) -> np.ndarray:
@@ -448,8 +493,9 @@ def dsnu_excess(d: CaptureData):
     dm = d.dark_map()
     if dm is None:
         return None
-    m, vt, n = dm
-    return _ratio(clipped_variance(remove_profiles(m)), vt / n, "the dark temporal variance")
+    m, _, n = dm
+    return _ratio(clipped_variance(remove_profiles(m)), d.profile_free_dark_variance() / n,
+                  "the dark temporal variance without row and column profiles")
 
 
 def hot_pixel_mask(d: CaptureData) -> np.ndarray | None:

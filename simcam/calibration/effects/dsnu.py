@@ -14,9 +14,10 @@ frames). ``var_left`` is the temporal variance of the dark frames with the same 
 each frame's deviation: temporal noise shared along a row or a column (row noise, a per-frame plane
 offset) leaves the mean map with its profiles, so subtracting the whole temporal variance would take
 it away twice (with row noise of 2.7 DN rms beside 1.5 DN of DSNU, sigma came out 22 % low).
-Proposed by its diagnostic (``dsnu_excess`` = that robust variance over ``temporal var / n``), the fit
+Proposed by its diagnostic (``dsnu_excess`` = that clipped variance over ``var_left / n``: about 1
+without DSNU whatever row or column noise the darks carry), the fit
 is the diagnostic's excess over the current model's parametric bootstrap instead,
-``sigma^2 = (value - sim_mean) temporal var / n``: the simulated captures carry the temporal noise, the
+``sigma^2 = (value - sim_mean) var_left / n``: the simulated captures carry the temporal noise, the
 model's other fixed patterns and what is left of the spread estimator's bias on coarsely quantised darks.
 (A mean map of a few integer codes sits on a lattice of 1/n DN. The MAD the statistic used before
 stuck to one lattice step there: on an independent simulator's ISO-100 darks, 0.33 DN of DSNU beside
@@ -41,50 +42,11 @@ class DsnuCard(OffsetSigmaCard, name="dsnu", params=Dsnu, diagnostics=("dsnu_exc
                marginal_rank=60):
 
     def fit(self, d, model, ctx):
-        m, vt, n = d.dark_map()
+        m, _, n = d.dark_map()
         if ctx.diagnostic == "dsnu_excess" and np.isfinite(ctx.value) and np.isfinite(ctx.sim_mean):
             # the excess over the current model's bootstrap (module docstring): the robust spread's bias on
             # coarse codes, the temporal noise and the model's own fixed patterns are in the simulated mean
-            s2 = (float(ctx.value) - float(ctx.sim_mean)) * vt / n
+            s2 = (float(ctx.value) - float(ctx.sim_mean)) * d.profile_free_dark_variance() / n
         else:
-            s2 = dg.clipped_variance(dg.remove_profiles(m)) - profile_free_temporal_variance(d.darks) / n
+            s2 = dg.clipped_variance(dg.remove_profiles(m)) - dg.profile_free_temporal_variance(d.darks) / n
         return Dsnu(sigma_dn=float(np.sqrt(max(s2, 0.0))))
-
-
-def profile_free_temporal_variance(darks) -> float:
-    """Temporal variance per pixel (DN^2) of dark sequences ``(n, H, W)`` once each frame's deviation
-    from its sequence mean has lost its per-plane, per-row and per-column means: the temporal noise
-    that is still in a mean map after :func:`~simcam.calibration.diagnostics.remove_profiles`.
-
-    Parameters
-    ----------
-    darks : sequence of ndarray
-        Dark sequences, each ``(n, H, W)`` with n >= 2 (DN).
-
-    Returns
-    -------
-    float
-        Pooled over the sequences (weights n - 1).
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> rng = np.random.default_rng(0)
-    >>> white = rng.normal(0, 2.0, (8, 64, 64))
-    >>> rows = rng.normal(0, 3.0, (8, 64, 1))  # row noise: shared along each row
-    >>> round(profile_free_temporal_variance([white + rows]), 1)  # only the white part is left
-    3.9
-    """
-    num = dof = 0.0
-    for seq in darks:
-        e = np.asarray(seq, dtype=np.float64)
-        if e.shape[0] < 2:
-            continue
-        e = e - e.mean(0)
-        for dy, dx in dg.PLANE_OFFSETS:
-            e[:, dy::2, dx::2] -= e[:, dy::2, dx::2].mean(axis=(1, 2), keepdims=True)
-        e -= e.mean(axis=2, keepdims=True)
-        e -= e.mean(axis=1, keepdims=True)
-        num += float(np.sum(e * e)) / (e.shape[1] * e.shape[2])
-        dof += e.shape[0] - 1
-    return num / dof if dof else 0.0

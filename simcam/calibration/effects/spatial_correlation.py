@@ -29,25 +29,25 @@ GRID = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5)
 class SpatialCorrelation(EffectParams):
     a: float = quantity("", "coupling of the [a, 1, a] kernel of the read noise (dimensionless, 0 to 0.5)",
                         profile="coefficient")
-    neighbours: str = quantity("", "which neighbours the kernel couples: same_colour (inside each CFA plane) or "
-                               "adjacent (on the mosaic)", scale=None, default="same_colour")
+    neighbours: str | None = quantity("", "which neighbours the kernel couples: adjacent (on the mosaic); None: "
+                                      "same-colour ones (inside each CFA plane)", scale=None, default=None)
 
 
 class SpatialCorrelationCard(DeclaredProfileCard, name="spatial_correlation", params=SpatialCorrelation, null_field="a",
                              diagnostics=("lag1_corr", "lag2_corr", "adjacent_corr"), needs_darks=True):
 
     def fit(self, d, model, ctx):
-        hood = "adjacent" if ctx.diagnostic == "adjacent_corr" else "same_colour"
+        hood = "adjacent" if ctx.diagnostic == "adjacent_corr" else None
         a = indirect_fit(d, model, self.name, lambda g: SpatialCorrelation(a=float(g), neighbours=hood), list(GRID),
-                         "adjacent_corr" if hood == "adjacent" else "lag1_corr", ctx.dark_specs, ctx.seed,
-                         ctx.simulate)
+                         "adjacent_corr" if hood else "lag1_corr", ctx.dark_specs, ctx.seed, ctx.simulate)
         return SpatialCorrelation(a=float(np.clip(a, 0.0, 0.5)), neighbours=hood)
 
     def to_profile(self, p, model):
         term = super().to_profile(p, model)
-        if p.neighbours != "same_colour":
+        if p.neighbours is not None:
             term.effect["neighbours"] = p.neighbours
         return term
 
     def from_profile(self, entry, full_scale_dn):
-        return SpatialCorrelation(a=float(entry["coefficient"]), neighbours=str(entry.get("neighbours", "same_colour")))
+        hood = entry.get("neighbours", "same_colour")
+        return SpatialCorrelation(a=float(entry["coefficient"]), neighbours=None if hood == "same_colour" else str(hood))
