@@ -13,7 +13,7 @@ the ISOs) with the generator's truth:
 
 * effects of the loop's vocabulary (its effect cards, ``VOCABULARY`` below) must be named; nothing else may be named
   (a *wrong* addition: a named effect that is not in the truth);
-* an effect outside the vocabulary (``adc_dnl``, ``charge_crosstalk``, ``undeclared_*``, ...) must not be forced
+* an effect outside the vocabulary (``charge_crosstalk``, ``undeclared_*``, ...) must not be forced
   into a named one: it may be ``unexplained``, an ``empirical_*`` component, or nothing;
 * the held-out structured KL must not grow at any ISO, and must drop >= 80 % at an ISO where an
   effect was added (the loop's held-out error: ``simcam.calibration.heldout``);
