@@ -51,7 +51,7 @@ def _exposure(st: EffectState, name: str) -> torch.Tensor:
 def _poisson_electrons(x, lam: torch.Tensor, electron: torch.Tensor, ctx: Ctx):
     """``x + electron * Poisson(lam)`` (lam float64 broadcastable to x)."""
     lam = lam.expand(x.shape[0], 1, *x.shape[-2:]) if lam.shape[-2:] == x.shape[-2:] else lam.expand_as(x)
-    k = torch.poisson(lam.contiguous(), generator=ctx.generator)
+    k = ctx.poisson(lam.contiguous())
     return x + (electron * k).to(x.dtype)
 
 
@@ -121,7 +121,7 @@ def hot_pixels(group: Group, x, ctx: Ctx, st: EffectState):
         el = ctx.scalar(group, lambda e: e.hot_electron or 0.0, dtype=torch.float64)
         safe = torch.where(el > 0, el, torch.ones_like(el))
         lam = (add.double() / safe).expand(x.shape[0], *add.shape[1:]).expand_as(x).contiguous()
-        drawn = (safe * torch.poisson(lam, generator=ctx.generator)).to(x.dtype)
+        drawn = (safe * ctx.poisson(lam)).to(x.dtype)
         add = torch.where(el > 0, drawn, add.to(x.dtype).expand_as(x))
     return torch.where(st.fixed("set_mask"), st.fixed("set_value"), x + add)
 

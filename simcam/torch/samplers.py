@@ -82,7 +82,7 @@ def poisson_scaled(clean: torch.Tensor, scale: torch.Tensor, beta2: torch.Tensor
             raise NoiseModelError(f"{where}: beta1 gives a Poisson mean of {lam_max:.3g} photo-electrons; expected "
                                   f"below {LAMBDA_MAX:.3g} (use the nlf model for such signals)")
     work = lam if lam.dtype in (torch.float32, torch.float64) else lam.float()
-    k = torch.poisson(work, generator=ctx.generator).to(clean.dtype)
+    k = ctx.poisson(work).to(clean.dtype)
     z = ctx.randn(clean.shape)
     if scale.requires_grad or beta2.requires_grad:
         return scale * k + torch.sqrt(beta2) * z
