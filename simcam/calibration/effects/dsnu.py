@@ -48,5 +48,5 @@ class DsnuCard(OffsetSigmaCard, name="dsnu", params=Dsnu, diagnostics=("dsnu_exc
             # coarse codes, the temporal noise and the model's own fixed patterns are in the simulated mean
             s2 = (float(ctx.value) - float(ctx.sim_mean)) * d.profile_free_dark_variance() / n
         else:
-            s2 = dg.clipped_variance(dg.remove_profiles(m)) - dg.profile_free_temporal_variance(d.darks) / n
+            s2 = dg.clipped_variance(dg.remove_profiles(m)) - d.profile_free_dark_variance() / n
         return Dsnu(sigma_dn=float(np.sqrt(max(s2, 0.0))))
