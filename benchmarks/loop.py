@@ -4,7 +4,7 @@ Each capture set has 3 ISOs; per ISO: darks at two exposure times x 16 frames, t
 frames, one scene x 16 frames (``.npy`` frames + ``sequence.yaml``, 12-bit Bayer RGGB). The sensor
 is a plain numpy Poisson-Gaussian with a dark current, a DSNU map and a PRNU map (not simcam's noise
 code). The loop runs with its defaults (whole frames; residual battery and bootstrap on at most
-512 x 512 pixels per frame, tiles spread over the frame beyond that) in a subprocess; peak RSS is
+448 x 448 pixels per frame, tiles spread over the frame beyond that) in a subprocess; peak RSS is
 that process's maximum resident set size (``resource.getrusage(RUSAGE_CHILDREN)``), wall time
 includes reading the frames. The machine's load average is printed with each row (other processes
 share the cores).

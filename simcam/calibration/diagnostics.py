@@ -18,7 +18,7 @@ row_spectrum_peak       periodic_pattern    max / median of the periodogram of r
                                             (per frame / its median; mean over frames / its
                                             9-bin running median)
 col_spectrum_peak       periodic_pattern    same along columns
-col_temporal_excess     (none)              var(column means of temporal residual) / (pixel var / H)
+col_temporal_excess     empirical_offset    var(column means of temporal residual) / (pixel var / H)
 dark_checker_jitter     (none)              log of: var over dark frames of the checkerboard contrast
                                             of the temporal residual (sites 00 + 11 - 01 - 10) /
                                             (pixel var / pixels)
@@ -48,6 +48,8 @@ code_width_spread       adc_dnl             relative spread of the ADC's code wi
                                             (IEEE Std 1241-2010 histogram test of DNL)
 lag1_corr / lag2_corr   spatial_correlation lag-1 / lag-2 autocorrelation inside each CFA plane
 adjacent_corr           spatial_correlation lag-1 autocorrelation on the mosaic (adjacent pixels)
+flat_adjacent_corr      charge_crosstalk    the same on the flats' temporal residuals (shot noise
+                                            shared between adjacent pixels)
 glow_field              amp_glow            largest t-value of a smooth field rising to a corner or an
                                             edge in the per-pixel dark slope map (DN/s), darks at
                                             every exposure time (:func:`glow_field`)
@@ -66,17 +68,19 @@ import numpy as np
 from scipy.ndimage import median_filter
 from scipy import stats as sst
 
+from .pixelwise import temporal_median, two_level_split
+
 PLANE_OFFSETS = ((0, 0), (0, 1), (1, 0), (1, 1))
 
 #: The battery, in report order. The effect each one proposes is on the effect's card
 #: (``EffectCard.diagnostics``, :mod:`simcam.calibration.effects`); a diagnostic no card claims
-#: (``col_temporal_excess``, ``dark_checker_jitter``) proposes none.
+#: (``dark_checker_jitter``) proposes none; ``col_temporal_excess`` proposes an empirical component.
 DIAGNOSTICS = (
     "ptc_curvature", "plane_gain_spread", "row_mean_excess", "row_spectrum_peak", "col_spectrum_peak",
     "col_temporal_excess", "dark_checker_jitter", "col_fpn_excess", "dsnu_excess", "hot_pixel_tail", "prnu_excess",
     "black_offset", "dark_signal_slope", "frame_mean_jitter", "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "lag1_corr",
     "lag2_corr", "defect_pixels", "glow_field",
-    "telegraph_pixels", "code_width_spread", "adjacent_corr",
+    "telegraph_pixels", "code_width_spread", "adjacent_corr", "flat_adjacent_corr",
 )
 
 #: The bootstrap null of the diagnostic on the left is not valid while one on the right is
@@ -115,6 +119,7 @@ NEEDS = {
     "lag1_corr": "needs a dark sequence",
     "lag2_corr": "needs a dark sequence",
     "adjacent_corr": "needs a dark sequence",
+    "flat_adjacent_corr": "needs a flat sequence",
     "defect_pixels": "needs a flat sequence (and darks or a declared black level)",
     "telegraph_pixels": "needs a dark sequence",
     "glow_field": "needs darks at >= 2 exposure times",
@@ -513,7 +518,7 @@ def hot_pixel_mask(d: CaptureData) -> np.ndarray | None:
         else:
             r_mean = remove_profiles(dm[0])
             thr = 6 * robust_sigma(r_mean)
-            r_med = remove_profiles(np.median(np.concatenate(d.darks).astype(np.float64), axis=0))
+            r_med = remove_profiles(temporal_median(np.concatenate(d.darks)))
             d.cache["hotmask"] = (r_mean > thr) & (r_med > thr) & ~_telegraph_mask(d)
     return d.cache["hotmask"]
 
@@ -568,41 +573,9 @@ def defect_pixels(d: CaptureData):
     return None if m is None else float(np.mean(m[0] | m[1]))
 
 
-#: a random-telegraph pixel's two levels are at least this many read-noise sigma apart ...
-RTN_GAP_SIGMA = 5.0
-#: ... and each is about as tight as the read noise: pooled within-level variance <= this x the read variance
-RTN_LEVEL_VAR = 2.0
 #: the looser (gap, level variance) of a pixel that is not taken for a hot pixel (:func:`hot_pixel_mask`):
 #: a telegraph pixel high in most frames looks hot, one whose step the read noise has blurred too
 RTN_HOT_EXCLUDE = (4.0, 3.0)
-
-
-def two_level_split(v: np.ndarray, sigma2: float, min_level: int = 2, gap_sigma: float = RTN_GAP_SIGMA,
-                    level_var: float = RTN_LEVEL_VAR) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per column of ``v`` (the n values of one pixel over frames, n >= 2 ``min_level``): the split of its
-    sorted values into a low and a high level of >= ``min_level`` values each with the least
-    within-level sum of squares (1-D 2-means), as (two-level mask, gap between the level means,
-    number of values on the high level).
-    Two-level: the gap is >= ``gap_sigma`` x sqrt(``sigma2``) and the pooled within-level variance
-    <= ``level_var`` x ``sigma2`` (a pixel with a wide unimodal spread, such as a hot
-    pixel's dark-charge shot noise, has a gap too, but wide levels; one heavy-tailed outlier is one frame)."""
-    n = v.shape[0]
-    s = np.sort(v, axis=0)
-    cs, cs2 = np.cumsum(s, 0), np.cumsum(s * s, 0)
-    tot, tot2 = cs[-1], cs2[-1]
-    best_w = np.full(v.shape[1:], np.inf)
-    gap = np.zeros(v.shape[1:])
-    high = np.zeros(v.shape[1:], np.int64)
-    for k in range(min_level, n - min_level + 1):  # k values on the low level, n - k on the high one
-        a, a2 = cs[k - 1], cs2[k - 1]
-        b, b2 = tot - a, tot2 - a2
-        w = (a2 - a * a / k) + (b2 - b * b / (n - k))
-        better = w < best_w
-        best_w = np.where(better, w, best_w)
-        gap = np.where(better, b / (n - k) - a / k, gap)
-        high = np.where(better, n - k, high)
-    mask = (gap >= gap_sigma * np.sqrt(sigma2)) & (best_w / max(n - 2, 1) <= level_var * sigma2)
-    return mask, gap, high
 
 
 def telegraph_split(d: CaptureData) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float] | None:
@@ -911,26 +884,38 @@ def lag2_corr(d):
     return _lag_corr(d, 2)
 
 
-def adjacent_corr(d: CaptureData):
-    """Lag-1 autocorrelation of the dark temporal residuals on the mosaic (adjacent pixels, of different
-    colours on a CFA sensor), along rows and along columns, each frame's row and column means removed:
-    electrical crosstalk between neighbouring lines couples adjacent pixels, which the in-plane statistics
-    (:func:`lag1_corr`, same-colour pixels 2 px apart) do not see."""
-    res = d.temporal_residuals("dark")
-    if not res:
-        return None
+def _mosaic_lag1(res: list[np.ndarray]) -> float:
+    """Mean lag-1 autocorrelation on the mosaic (along rows and along columns) of temporal residuals,
+    each frame's row and column means removed."""
     vals = []
     for r in res:
         r = r - r.mean(axis=2, keepdims=True)
         r = r - r.mean(axis=1, keepdims=True)
         den = float(np.mean(r * r))
         if den <= 0:
-            raise NotApplicable("the dark residual's variance is 0 (quantisation-dominated darks)")
+            raise NotApplicable("the temporal residual's variance is 0 (constant or quantisation-dominated frames)")
         if r.shape[1] < 2 or r.shape[2] < 2:
             raise NotApplicable("the frame is narrower than 2 pixels")
         vals.append(float(np.mean(r[:, :, 1:] * r[:, :, :-1])) / den)
         vals.append(float(np.mean(r[:, 1:, :] * r[:, :-1, :])) / den)
     return float(np.mean(vals))
+
+
+def adjacent_corr(d: CaptureData):
+    """Lag-1 autocorrelation of the dark temporal residuals on the mosaic (adjacent pixels, of different
+    colours on a CFA sensor), along rows and along columns, each frame's row and column means removed:
+    electrical crosstalk between neighbouring lines couples adjacent pixels, which the in-plane statistics
+    (:func:`lag1_corr`, same-colour pixels 2 px apart) do not see."""
+    res = d.temporal_residuals("dark")
+    return _mosaic_lag1(res) if res else None
+
+
+def flat_adjacent_corr(d: CaptureData):
+    """:func:`adjacent_corr` on the flats' temporal residuals: photo-electrons shared with adjacent pixels
+    before read-out (charge-domain crosstalk) correlate the shot noise of neighbours, which dark frames
+    (no photo-electrons) do not show; read-side coupling shows in both, and the bootstrap null carries it."""
+    res = d.temporal_residuals("flat")
+    return _mosaic_lag1(res) if res else None
 
 
 def dark_signal_slope(d: CaptureData):

@@ -224,12 +224,26 @@ class StructuredKL:
             if hists:
                 self.fams[fam] = (hists, ntot)
 
-    def add(self, sim: list[np.ndarray]) -> None:
+    def counts(self, sim: list[np.ndarray]) -> list[np.ndarray]:
+        """One simulated replicate's histograms, in the order :meth:`add_counts` takes them (reads the
+        accumulator only: replicates may be histogrammed in parallel threads)."""
         mv = group_values(sim, self.fixed, self.scales)[0]
+        out = []
         for fam, (hists, _n) in self.fams.items():
-            for _w, edges, _nc, mcs, gi in hists:
+            for _w, edges, _nc, _mcs, gi in hists:
                 x = mv[fam][gi] if gi is not None else np.concatenate(mv[fam])
-                mcs.append(np.histogram(x, edges)[0])
+                out.append(np.histogram(x, edges)[0])
+        return out
+
+    def add_counts(self, counts: list[np.ndarray]) -> None:
+        """Append the histograms :meth:`counts` gave for one replicate."""
+        it = iter(counts)
+        for hists, _n in self.fams.values():
+            for _w, _e, _nc, mcs, _g in hists:
+                mcs.append(next(it))
+
+    def add(self, sim: list[np.ndarray]) -> None:
+        self.add_counts(self.counts(sim))
 
     def result(self) -> dict:
         fams = {fam: _family([(w, nc, mcs) for w, _e, nc, mcs, _g in hists], ntot)

@@ -17,7 +17,9 @@ Per ISO group of a capture set:
    model, is ``unexplained``); *every* proposed effect is fitted by its card, the current model and
    each candidate are simulated on the held-out sequences with the same random streams, and each
    candidate is scored by the held-out synthetic log-likelihood of all applicable diagnostics
-   (gain over the current model, with its jackknife standard error).
+   (gain over the current model, with its jackknife standard error). Candidates race: each gets
+   :data:`RACE_REPLICATES` held-out replicates, and only those still within reach of the leader
+   (or of the minimum gain) get the rest, so a clear loser costs a third of a full scoring.
 5. The best candidate is added when its gain exceeds its sampling noise
    (:meth:`simcam.calibration.attribution.Comparison.beats`) and the held-out pixel marginal KL
    (Noise Flow binning, Jeffreys-smoothed model histogram) does not grow beyond ``kl_tolerance``
@@ -30,17 +32,26 @@ Per ISO group of a capture set:
    When no candidate beats the current model, the proposing diagnostics are ``unexplained`` with the
    candidates' scores as the reason, and the loop stops (also when nothing significant is left, or
    after ``max_iterations``).
+
+Cost. Every replicate (a simulated capture reduced to its statistics) is drawn from its own stream,
+``(seed, iso, purpose, ..., r)``, and replicates run on ``threads`` threads (numpy and the noise
+kernels release the GIL) with their results merged in replicate order: the same bytes for any thread
+count. Where the fit and held-out halves have the same layout (every sequence an even number of >= 4
+frames) the model's held-out replicates are also its bootstrap null on the fit frames (step 3), so
+no separate bootstrap is simulated.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import os
+
 import numpy as np
 
 from ..errors import DatasetError
 from . import diagnostics as dg
-from .attribution import compare
+from .attribution import MIN_GAIN, compare
 from .capture import CaptureSet, Sequence
 from .effects import FitContext, card_for, effect_for, excluded_by
 from .fit import base_fit, fit_effect
@@ -61,6 +72,7 @@ class LoopConfig:
     tile: int = DEFAULT_TILE
     progress: bool | None = None  # progress bars (None: when the output is a terminal)
     kl_tolerance: float = 0.10  # relative growth of held-out KL still accepted (plus twice its sampling floor)
+    threads: int | None = None  # replicates simulated at once (None: the cores this process may use)
 
     def region(self) -> Region:
         """The pixels the residual battery and the bootstrap analyse (:mod:`simcam.calibration.region`)."""
@@ -155,6 +167,11 @@ class Group:
         if not self.held:
             notes.append("no sequence has >= 4 frames: held-out errors are computed on the fit frames")
             self.held = list(self.fit)
+        #: the fit and held-out halves hold the same sequences with the same frame counts (even frame counts,
+        #: every sequence >= 4 frames; or no held-out half): a model's held-out replicates are then also its
+        #: bootstrap null on the fit frames
+        self.same_layout = len(self.fit) == len(self.held) and all(
+            a[1].shape == b[1].shape for a, b in zip(self.fit, self.held))
         self.fit_data = self._data(self.fit)
         self.held_data = self._data(self.held)
 
@@ -243,6 +260,89 @@ def _summary(held: dict) -> dict:
     return {k: held[k] for k in HELDOUT_KEYS}
 
 
+#: held-out replicates every candidate gets before the race drops those that cannot be chosen
+RACE_REPLICATES = 4
+#: a candidate leaves the race when its gain is this many combined SEs behind the leader's, or this many of
+#: its own SEs below :data:`attribution.MIN_GAIN`
+RACE_Z = 5.0
+
+
+def _threads(cfg: LoopConfig) -> int:
+    if cfg.threads is not None:
+        return max(1, int(cfg.threads))
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+class HeldOut:
+    """The held-out simulations of one model, replicate by replicate (a candidate can leave the race
+    after :data:`RACE_REPLICATES` and the others go on): pixel-marginal counts, the structured KL's
+    histograms, the diagnostics of every replicate and the first replicates' values for the figures.
+    Replicate ``r`` is drawn from the stream ``(seed, iso, 2, 0, r)`` whatever the model (common random
+    numbers), so the result is the same bytes whatever the thread count."""
+
+    def __init__(self, loop: "Loop", model: LoopModel, diagnostics=(), label: str = "current model"):
+        g = loop.g
+        self.loop, self.model, self.diagnostics, self.label = loop, model, tuple(diagnostics), label
+        self.specs = g.specs(model, g.held)
+        real_f = noise_frames(g.held, [f for _, f, _ in g.held], self.specs, model)
+        self.real = np.concatenate([x.ravel() for x in real_f])
+        self.n_counts = np.histogram(self.real, KL_EDGES)[0]
+        self.m_counts = np.zeros_like(self.n_counts)
+        self.m_size = 0
+        self.plot: list[np.ndarray] = []  # the first replicates' values, up to twice the data's count
+        self.plot_size = 0
+        self.st = StructuredKL(real_f, [sp.fixed_in_clean for sp in self.specs])
+        self.sims: dict[str, list] = {name: [] for name in self.diagnostics}
+        self.done = 0
+
+    def _one(self, r: int):
+        """Replicate ``r`` reduced to what the result needs (runs in a worker thread)."""
+        g, model, specs = self.loop.g, self.model, self.specs
+        sims = simulate_capture(model, specs, self.loop._rng(2, 0, r))
+        nf = noise_frames(g.held, sims, specs, model)
+        counts = sum(np.histogram(x, KL_EDGES)[0] for x in nf)
+        size = sum(x.size for x in nf)
+        plot = np.concatenate([x.ravel() for x in nf]) if r * self.real.size < 2 * self.real.size else None
+        st = self.st.counts(nf)
+        stats = dg.compute_all(_capture(g, g.held, sims, specs), self.diagnostics) if self.diagnostics else {}
+        return counts, size, plot, st, stats
+
+    def extend(self, upto: int) -> "HeldOut":
+        """Simulate replicates ``done .. upto - 1``."""
+        rs = range(self.done, upto)
+        for counts, size, plot, st, stats in self.loop.map(self._one, rs, f"held-out, {self.label}"):
+            self.m_counts += counts
+            self.m_size += size
+            if plot is not None and self.plot_size < 2 * self.real.size:
+                take = plot[: 2 * self.real.size - self.plot_size]
+                self.plot.append(take)
+                self.plot_size += take.size
+            self.st.add_counts(st)
+            for name in self.diagnostics:
+                self.sims[name].append(stats[name])
+        self.done = max(self.done, upto)
+        return self
+
+    def result(self) -> dict:
+        loop, g = self.loop, self.loop.g
+        kl = kl_counts(self.n_counts, self.m_counts)
+        floor = kl_floor(self.n_counts + self.m_counts, self.real.size, self.m_size)
+        st = self.st.result()
+        out = {"kl": kl, "nll": nll_per_dim(g.held, self.specs, self.model), "kl_floor": floor,
+               "kl_excess": max(kl - floor, 0.0), "kl_structured": st["kl"], "structured": st["families"],
+               "real_noise": _thin(self.real), "model_noise": _thin(np.concatenate(self.plot), 2 * PLOT_VALUES),
+               "sims": dict(self.sims), "replicates": self.done}
+        for name in self.diagnostics:
+            vals = self.sims[name]
+            if loop.held_stats.get(name) is None or any(v is None for v in vals):
+                continue
+            out[name] = dg.discrepancy(name, loop.held_stats[name], vals, loop.held_floor(name))
+        return out
+
+
 class Loop:
     """Runs the loop on one ISO group."""
 
@@ -256,6 +356,7 @@ class Loop:
         self.held_stats = dg.compute_all(group.held_data)
         self.applicable = [k for k, v in self.data_stats.items() if v is not None]
         self._floors: dict[str, float] = {}
+        self.threads = _threads(cfg)
 
     def held_floor(self, name: str) -> float:
         """The resolution of diagnostic ``name`` on the held-out data (:func:`diagnostics.resolution`)."""
@@ -263,97 +364,126 @@ class Loop:
             self._floors[name] = dg.resolution(name, self.g.held_data)
         return self._floors[name]
 
-    def _bar(self, n: int, what: str):
+    def map(self, fn, items, what: str):
+        """``fn`` over ``items`` on :attr:`threads` threads (numpy and the noise kernels release the GIL),
+        results in the order of ``items``, with a progress bar."""
         from tqdm.auto import tqdm
 
+        items = list(items)
         label = f"ISO {self.iso}" if self.iso > 0 else "ISO not given"
-        return tqdm(range(n), desc=f"{label}: {what}", unit="capture", leave=False,
-                    disable=None if self.cfg.progress is None else not self.cfg.progress)
+        bar = tqdm(total=len(items), desc=f"{label}: {what}", unit="capture", leave=False,
+                   disable=None if self.cfg.progress is None else not self.cfg.progress)
+        try:
+            if self.threads <= 1 or len(items) <= 1:
+                for x in items:
+                    yield fn(x)
+                    bar.update(1)
+                return
+            from concurrent.futures import ThreadPoolExecutor
+
+            with ThreadPoolExecutor(min(self.threads, len(items))) as ex:
+                for out in ex.map(fn, items):
+                    yield out
+                    bar.update(1)
+        finally:
+            bar.close()
 
     def _rng(self, *tag):
         return np.random.default_rng([self.cfg.seed, self.iso, *tag])
 
-    def evaluate(self, model: LoopModel, tag: int) -> tuple[list, list]:
-        """Discrepancies on the fit frames (Holm-marked) and the simulated statistics."""
+    def evaluate(self, model: LoopModel, tag: int, held: dict | None = None) -> list:
+        """Discrepancies of the fit frames' statistics from the model's bootstrap null (Holm-marked).
+
+        The null is ``replicates`` captures simulated on the fit frames' layout; where the fit and held-out
+        halves have the same layout (:attr:`Group.same_layout`) the model's held-out replicates ``held``
+        (already simulated to score it, every applicable diagnostic on each) are draws of the same null
+        and are used instead."""
+        if held is not None and self.g.same_layout:
+            return self._discrepancies(held["sims"])
         specs = self.g.specs(model, self.g.fit)
-        sim_stats = []
-        for r in self._bar(self.cfg.replicates, f"bootstrap {tag}"):
+
+        def one(r):
             sims = simulate_capture(model, specs, self._rng(1, tag, r))
-            sim_stats.append(dg.compute_all(_capture(self.g, self.g.fit, sims, specs), self.applicable))
+            return dg.compute_all(_capture(self.g, self.g.fit, sims, specs), self.applicable)
+
+        sim_stats = list(self.map(one, range(self.cfg.replicates), f"bootstrap {tag}"))
+        return self._discrepancies({name: [s[name] for s in sim_stats] for name in self.applicable})
+
+    def _discrepancies(self, sims: dict) -> list:
         discs = []
         for name in self.applicable:
-            vals = [s[name] for s in sim_stats]
+            vals = sims[name]
             undefined = sum(v is None for v in vals)
             if undefined:  # defined on the data, not on (some) simulated captures: no null to compare with
                 self.not_applicable[name] = (f"undefined on {undefined} of {len(vals)} simulated captures of the "
                                              "current model (no bootstrap null)")
                 continue
             discs.append(dg.discrepancy(name, self.data_stats[name], vals, dg.resolution(name, self.g.fit_data)))
-        return dg.holm(discs, self.cfg.alpha), sim_stats
+        return dg.holm(discs, self.cfg.alpha)
 
-    def heldout(self, model: LoopModel, tag: int, diagnostics=()) -> dict:
-        specs = self.g.specs(model, self.g.held)
-        real_f = noise_frames(self.g.held, [f for _, f, _ in self.g.held], specs, model)
-        real = np.concatenate([x.ravel() for x in real_f])
-        n_counts = np.histogram(real, KL_EDGES)[0]
-        m_counts = np.zeros_like(n_counts)
-        m_size = 0
-        plot_noise, plot_size = [], 0  # the first replicates' values, up to twice the data's count
-        sim_stats = []
-        st_acc = StructuredKL(real_f, [sp.fixed_in_clean for sp in specs])
-        for r in self._bar(self.cfg.heldout_replicates, f"held-out {tag}"):
-            sims = simulate_capture(model, specs, self._rng(2, tag, r))
-            nf = noise_frames(self.g.held, sims, specs, model)
-            st_acc.add(nf)
-            for x in nf:
-                m_counts += np.histogram(x, KL_EDGES)[0]
-                m_size += x.size
-                if plot_size < 2 * real.size:
-                    take = x.ravel()[: 2 * real.size - plot_size]
-                    plot_noise.append(take)
-                    plot_size += take.size
-            if diagnostics:
-                sim_stats.append(dg.compute_all(_capture(self.g, self.g.held, sims, specs), diagnostics))
-            del sims, nf
-        kl = kl_counts(n_counts, m_counts)
-        floor = kl_floor(n_counts + m_counts, real.size, m_size)
-        st = st_acc.result()
-        out = {"kl": kl, "nll": nll_per_dim(self.g.held, specs, model), "kl_floor": floor,
-               "kl_excess": max(kl - floor, 0.0), "kl_structured": st["kl"], "structured": st["families"],
-               "real_noise": _thin(real), "model_noise": _thin(np.concatenate(plot_noise), 2 * PLOT_VALUES)}
-        out["sims"] = {}
-        for name in diagnostics:
-            vals = [s[name] for s in sim_stats]
-            out["sims"][name] = vals
-            if self.held_stats.get(name) is None or any(v is None for v in vals):
-                continue
-            out[name] = dg.discrepancy(name, self.held_stats[name], vals, self.held_floor(name))
-        return out
+    def heldout(self, model: LoopModel, diagnostics=()) -> dict:
+        """All :attr:`LoopConfig.heldout_replicates` held-out replicates of ``model`` (:class:`HeldOut`)."""
+        return HeldOut(self, model, diagnostics).extend(self.cfg.heldout_replicates).result()
 
-    def _candidate(self, effect: str, proposed_by: list, model: LoopModel, tag: int, held_cur: dict):
-        """Fit ``effect`` on the fit frames and score it on the held-out ones against the current model
-        (same random streams): (candidate record for the report, fitted model or None, its held-out dict)."""
+    def _fit_candidate(self, effect: str, proposed_by: list, model: LoopModel, tag: int, via=None):
+        """Fit ``effect`` on the fit frames from the proposing diagnostic ``via`` (default: the strongest):
+        (candidate record for the report, fitted model or None)."""
         card = card_for(effect)
-        chosen = proposed_by[0]
-        rec = {"effect": effect, "proposed_by": [d.name for d in proposed_by]}
+        chosen = via or proposed_by[0]
+        rec = {"effect": effect, "proposed_by": [d.name for d in proposed_by], "fitted_from": chosen.name}
         ctx = FitContext(diagnostic=chosen.name, value=chosen.value, sim_mean=chosen.sim_mean,
                          seed=self.cfg.seed * 1000 + tag, simulate=simulate_capture,
                          dark_specs=[sp for sp in self.g.specs(model, self.g.fit)
                                      if sp.kind == "dark" and not sp.series_only])
         if card.needs_darks and not ctx.dark_specs:
-            return dict(rec, skipped="needs a dark sequence to fit"), None, None
+            return dict(rec, skipped="needs a dark sequence to fit"), None
         cand = fit_effect(effect, self.g.fit_data, model, ctx)
         rec["parameters"] = cand.effects[effect].to_dict()
         if card.is_null(cand.effects[effect]):
-            return dict(rec, skipped=f"the fitted {effect} has zero magnitude"), None, None
-        held = self.heldout(cand, 0, tuple(self.applicable))  # the streams of held_cur (common random numbers)
-        cmp = compare(self.held_stats, self._floor_map(), held_cur["sims"], held["sims"])
-        kl_ok = held["kl"] <= held_cur["kl"] * (1 + self.cfg.kl_tolerance) + 2 * held_cur["kl_floor"]
+            return dict(rec, skipped=f"the fitted {effect} has zero magnitude"), None
+        return rec, cand
+
+    def _score(self, rec: dict, run: HeldOut, held_cur: dict) -> None:
+        """``rec`` gets the held-out comparison of ``run``'s replicates with the current model's same ones."""
+        n = run.done
+        cur = {k: v[:n] for k, v in held_cur["sims"].items()}
+        cmp = compare(self.held_stats, self._floor_map(), cur, run.sims)
         rec.update({"heldout_gain": cmp.gain, "heldout_gain_sd": cmp.sd, "statistics_compared": cmp.diagnostics,
-                    "moved_most": [{"diagnostic": n, "gain": g} for n, g in cmp.top()],
-                    "kl_before": held_cur["kl"], "kl_after": held["kl"], "kl_ok": bool(kl_ok),
-                    "beats_current": bool(cmp.beats() and kl_ok)})
-        return rec, cand, held
+                    "moved_most": [{"diagnostic": k, "gain": g} for k, g in cmp.top()], "replicates": n,
+                    "_beats": cmp.beats()})
+
+    def _race(self, fitted: list, held_cur: dict) -> list:
+        """Score every fitted candidate (record, model) on the held-out frames: all get
+        :data:`RACE_REPLICATES` replicates, those that can still be chosen get the rest (a candidate
+        leaves when its gain is :data:`RACE_Z` combined SEs behind the leader's, beyond the window in which
+        candidates count as tied, or :data:`RACE_Z` SEs below :data:`attribution.MIN_GAIN`). Returns
+        (record, model, held-out dict) per candidate."""
+        R = self.cfg.heldout_replicates
+        first = min(RACE_REPLICATES, R)
+        runs = []
+        for rec, cand in fitted:
+            run = HeldOut(self, cand, tuple(self.applicable), f"+ {rec['effect']}").extend(first)
+            self._score(rec, run, held_cur)
+            runs.append((rec, cand, run))
+        if first < R:
+            lead = max(runs, key=lambda t: t[0]["heldout_gain"])[0]
+            for rec, _cand, run in runs:
+                behind = lead["heldout_gain"] - rec["heldout_gain"]
+                if behind > RACE_Z * np.hypot(lead["heldout_gain_sd"], rec["heldout_gain_sd"]):
+                    rec["left_race"] = f"{behind:.3g} nats behind {lead['effect']} after {first} replicates"
+                elif rec["heldout_gain"] + RACE_Z * rec["heldout_gain_sd"] < MIN_GAIN:
+                    rec["left_race"] = f"gain below {MIN_GAIN:g} nats by > {RACE_Z:g} SE after {first} replicates"
+                else:
+                    self._score(rec, run.extend(R), held_cur)
+        out = []
+        for rec, cand, run in runs:
+            held = run.result()
+            kl_ok = held["kl"] <= held_cur["kl"] * (1 + self.cfg.kl_tolerance) + 2 * held_cur["kl_floor"]
+            beats = rec.pop("_beats") and "left_race" not in rec
+            rec.update({"kl_before": held_cur["kl"], "kl_after": held["kl"], "kl_ok": bool(kl_ok),
+                        "beats_current": bool(beats and kl_ok)})
+            out.append((rec, cand, held))
+        return out
 
     def _floor_map(self) -> dict:
         return {n: self.held_floor(n) for n in self.applicable}
@@ -364,11 +494,11 @@ class Loop:
         model = start if start is not None else base
         res = GroupResult(self.iso, base, model)
         tag = 0
-        discs, _ = self.evaluate(model, tag)
+        held_cur = self.heldout(model, tuple(self.applicable))
+        discs = self.evaluate(model, tag, held_cur)
         res.base_disc = discs
         excluded: set[str] = set()  # unexplained for good
         unmodelled: set[str] = set()  # significant, and no effect of the vocabulary explains them
-        held_cur = self.heldout(model, tag, tuple(self.applicable))
         res.heldout_base = _summary(held_cur)
         res.plots["hist_base"] = (held_cur["real_noise"], held_cur["model_noise"])
 
@@ -406,8 +536,14 @@ class Loop:
             if not proposals:
                 continue
             tag += 1
-            tried = [self._candidate(effect, ds, model, tag, held_cur) for effect, ds in proposals.items()]
-            scored = [t for t in tried if t[1] is not None]
+            # a card with several forms (spatial_correlation's two kernels) gives one candidate per form its
+            # proposing diagnostics point to
+            fits = [self._fit_candidate(effect, ds, model, tag, via) for effect, ds in proposals.items()
+                    for via in card_for(effect).variants(ds)]
+            scored = self._race([f for f in fits if f[1] is not None], held_cur)
+            by_rec = {id(t[0]): t for t in scored}
+            tried = [by_rec.get(id(rec), (rec, None, None)) for rec, _c in fits]
+            scored = [t for t in scored if "left_race" not in t[0]] or scored  # all left: none beats
             best = max(scored, key=lambda t: t[0]["heldout_gain"]) if scored else None
             if best is not None and self.preferred:
                 # candidates the held-out frames cannot tell apart from the best: one the sensor's other ISOs
@@ -429,9 +565,9 @@ class Loop:
                 continue
             brec, cand, held = best
             effect = brec["effect"]
-            chosen = proposals[effect][0]
+            chosen = next(d for d in proposals[effect] if d.name == brec["fitted_from"])
             accepted = brec["beats_current"]
-            new_discs = self.evaluate(cand, tag)[0] if accepted else None
+            new_discs = self.evaluate(cand, tag, held) if accepted else None
             after = next((d for d in new_discs if d.name == chosen.name), None) if accepted else None
             hb, ha = held_cur.get(chosen.name), held.get(chosen.name)
             rec = {
@@ -452,6 +588,8 @@ class Loop:
                 "accepted": accepted,
                 "candidates": [t[0] for t in tried],
             }
+            if card_for(effect).family is not None:  # an empirical component: its residual family
+                rec["not_in_vocabulary"] = card_for(effect).family
             res.plots.setdefault("hists", []).append(
                 (effect, held_cur["real_noise"], held_cur["model_noise"], held["model_noise"]))
             res.iterations.append(rec)
@@ -463,6 +601,7 @@ class Loop:
                 f"{r['effect']}: {r['skipped']}" if "skipped" in r else
                 f"{r['effect']}: held-out gain {r['heldout_gain']:.3g} ± {r['heldout_gain_sd']:.2g} nats"
                 + ("" if r["kl_ok"] else ", pixel KL grew")
+                + (f" (left the race: {r['left_race']})" if "left_race" in r else "")
                 for r, _c, _h in tried)
             for ds in proposals.values():
                 for d in ds:

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 #: default pixel budget of the analysed region (the whole frame up to this size).
-DEFAULT_MAX_PIXELS = 512 * 512
+DEFAULT_MAX_PIXELS = 448 * 448
 #: default tile side of a mosaic (even).
 DEFAULT_TILE = 128
 

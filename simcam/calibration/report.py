@@ -611,7 +611,9 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
                      "<th>kept</th><th>parameters</th></tr>")
         for i, it in enumerate(g["iterations"], 1):
             h = it["heldout"]
-            parts.append(f"<tr><td>{i}</td><td class=l>{it['effect']}</td><td class=l>{it['diagnostic']}</td>"
+            label = it["effect"] + (f" <i>(empirical, not in the vocabulary: {html.escape(it['not_in_vocabulary'])})</i>"
+                                    if it.get("not_in_vocabulary") else "")
+            parts.append(f"<tr><td>{i}</td><td class=l>{label}</td><td class=l>{it['diagnostic']}</td>"
                          f"<td>{_fmt(it['discrepancy_before'])}</td><td>{_fmt(it['discrepancy_after'])}</td>"
                          f"<td>{_fmt(h['discrepancy_before'])}</td><td>{_fmt(h['discrepancy_after'])}</td>"
                          f"<td>{_fmt(h['kl_before'])}</td><td>{_fmt(h['kl_after'])}</td>"
@@ -657,20 +659,25 @@ def _candidates_table(iterations: list[dict]) -> str:
         return ""
     rows = ["<h3>Candidates per iteration (held-out synthetic log-likelihood gain over the current model)</h3>"
             "<table><tr><th>#</th><th>candidate</th><th>proposed by</th><th>gain (nats)</th><th>± SD</th>"
-            "<th>statistics that moved most</th><th>pixel KL after</th><th>beats current</th><th>chosen</th></tr>"]
+            "<th>replicates</th><th>statistics that moved most</th><th>pixel KL after</th><th>beats current</th>"
+            "<th>chosen</th></tr>"]
     for i, it in enumerate(iterations, 1):
         for c in it.get("candidates", []):
             if "skipped" in c:
                 rows.append(f"<tr><td>{i}</td><td class=l>{c['effect']}</td><td class=l>{', '.join(c['proposed_by'])}</td>"
-                            f"<td colspan=6 class=l>{html.escape(c['skipped'])}</td></tr>")
+                            f"<td colspan=7 class=l>{html.escape(c['skipped'])}</td></tr>")
                 continue
             moved = ", ".join(f"{m['diagnostic']} {m['gain']:+.3g}" for m in c["moved_most"])
             chosen = ("" if not c["chosen"] else
                       f"yes (tied: {html.escape(c['tie_broken_by'])})" if c.get("tie_broken_by") else "yes")
-            rows.append(f"<tr><td>{i}</td><td class=l>{c['effect']}</td><td class=l>{', '.join(c['proposed_by'])}</td>"
+            verdict = (f"no (left the race: {html.escape(c['left_race'])})" if c.get("left_race") else
+                       "no" if c["kl_ok"] else "no (pixel KL grew)")
+            several = len(c["proposed_by"]) > 1 and c.get("fitted_from")
+            name = c["effect"] + (f" (fitted from {c['fitted_from']})" if several else "")
+            rows.append(f"<tr><td>{i}</td><td class=l>{name}</td><td class=l>{', '.join(c['proposed_by'])}</td>"
                         f"<td>{_fmt(c['heldout_gain'])}</td><td>{_fmt(c['heldout_gain_sd'])}</td>"
-                        f"<td class=l>{html.escape(moved)}</td><td>{_fmt(c['kl_after'])}</td>"
-                        f"<td>{'yes' if c['beats_current'] else 'no' if c['kl_ok'] else 'no (pixel KL grew)'}</td>"
+                        f"<td>{c.get('replicates', '')}</td><td class=l>{html.escape(moved)}</td><td>{_fmt(c['kl_after'])}</td>"
+                        f"<td>{'yes' if c['beats_current'] else verdict}</td>"
                         f"<td>{chosen}</td></tr>")
     rows.append("</table>")
     return "".join(rows)

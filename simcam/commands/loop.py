@@ -7,6 +7,8 @@ from typing import Optional
 
 import typer
 
+from ..calibration.region import DEFAULT_MAX_PIXELS
+
 
 def loop(
     capture_dir: list[Path] = typer.Argument(..., metavar="CAPTURE_DIR...",
@@ -18,7 +20,7 @@ def loop(
     replicates: int = typer.Option(16, "--replicates", help="Bootstrap replicates per diagnostic evaluation (>= 4)."),
     alpha: float = typer.Option(0.01, "--alpha", help="Family-wise significance level (Holm)."),
     max_size: Optional[int] = typer.Option(None, "--max-size", help="Analyse a centre crop of this many pixels per side instead of the whole frame."),
-    max_pixels: int = typer.Option(512 * 512, "--max-pixels", help="Pixels per frame the residual battery and bootstrap analyse: the whole frame up to this, else tiles spread over the frame."),
+    max_pixels: int = typer.Option(DEFAULT_MAX_PIXELS, "--max-pixels", help="Pixels per frame the residual battery and bootstrap analyse: the whole frame up to this, else tiles spread over the frame."),
     workers: Optional[int] = typer.Option(None, "--workers", min=0,
                                           help="Batch: dask worker processes (default: one per core; 0: serial)."),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Batch: dask scheduler address."),

@@ -7,6 +7,7 @@ Signal chain (all in DN, per pixel ``p`` of frame ``f``; EMVA 1288 R4.0 sec. 2,
 seed eq. 3.6 for the Poisson-Gaussian core)::
 
     e      ~ Poisson(mu_e[p] * (1 + prnu[p]) * (1 + flicker[f]))        photo-electrons
+    e      = (1 - 4 c_x) e + c_x * (4 adjacent e)                       charge crosstalk
     e     += Poisson(dark_rate[p] * t)                                  dark electrons (exposure t)
     x      = K * g[c] * e + read[f, p] + row[f, r] + periodic[f, r]     DN, linear
     y      = x + c_nl * x**2 / (white - black)                          compressive response
@@ -29,6 +30,8 @@ seed eq. 3.6 for the Poisson-Gaussian core)::
 * ``amp_glow``: dark electrons at ``rate_e_per_s`` x exp(-d / (``scale`` L)) per second, d the distance
   from ``origin`` (a corner: L the diagonal; an edge: L the extent across it), added to ``dark_rate``;
   with it, too, :func:`capture_set` adds the dark at 1 s.
+* ``charge_crosstalk``: photo-electrons (with their shot noise) shared with the 4 adjacent pixels,
+  share ``c`` each (circular at the borders), before dark electrons and read noise.
 * ``flicker`` N(0, s^2) per frame, only where there is light (``frame_flicker``).
 * ``rtn``: a set of pixels (``fraction``, drawn once per sensor, after the other patterns) with steps
   log-normal about ``amplitude_dn`` (spread ``log_sigma``), added to ``x`` in the frames where the
@@ -54,7 +57,7 @@ EFFECTS = (
     "row_noise", "column_fpn", "dsnu", "prnu", "hot_pixels", "heavy_tail_read", "quantization",
     "spatial_correlation", "periodic_pattern", "black_level_offset", "frame_flicker",
     "nonlinearity", "channel_gain", "dark_current", "dead_pixels", "amp_glow",
-    "rtn", "adc_dnl",
+    "rtn", "adc_dnl", "charge_crosstalk",
 )
 
 #: Parameters the tests use for each effect alone (chosen well above the
@@ -78,6 +81,7 @@ DEFAULT_EFFECTS = {
     "rtn": {"fraction": 0.015, "amplitude_dn": 20.0, "log_sigma": 0.3, "p_high": 0.4},
     "amp_glow": {"rate_e_per_s": 40.0, "origin": "top_right", "scale": 0.2},
     "adc_dnl": {"dnl_sigma": 0.2},
+    "charge_crosstalk": {"c": 0.05},
 }
 
 
@@ -202,6 +206,9 @@ class HiddenEffectSensor:
             if "frame_flicker" in eff:
                 lam = lam * (1 + rng.normal(0, eff["frame_flicker"]["sigma"]))
             e = rng.poisson(np.maximum(lam, 0))
+            if "charge_crosstalk" in eff:  # photo-electrons shared with the 4 adjacent pixels (circular)
+                c = eff["charge_crosstalk"]["c"]
+                e = (1 - 4 * c) * e + c * sum(np.roll(e, k, axis=a) for a in (0, 1) for k in (1, -1))
             if self.dark_rate is not None:
                 e = e + rng.poisson(self.dark_rate * exposure_s)
             if self.dead is not None:

@@ -55,11 +55,11 @@ def scaled(effect: str, scale: float) -> dict:
     return p
 
 
-def run_case(effects: tuple, seed: int = 7, scale: float = 1.0, **spec_kw):
+def run_case(effects: tuple, seed: int = 7, scale: float = 1.0, threads: int | None = None, **spec_kw):
     from simcam.calibration.loop import LoopConfig, run_loop
 
     spec = SensorSpec(effects={e: scaled(e, scale) for e in effects}, **spec_kw)
-    return run_loop(in_memory_capture(capture_set(spec, seed=seed)), LoopConfig())[0]
+    return run_loop(in_memory_capture(capture_set(spec, seed=seed)), LoopConfig(threads=threads))[0]
 
 
 def matrix(cases=CASES):

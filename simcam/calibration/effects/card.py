@@ -248,6 +248,8 @@ class EffectCard:
         Position of its term in the closed-form marginal variance.
     null_field, null_value : str or None, float
         The parameter, and its value, that make the effect the identity.
+    family : str or None
+        For an empirical component, the residual family it stands for (None: a named effect).
 
     Examples
     --------
@@ -287,6 +289,9 @@ class EffectCard:
     null_field: ClassVar[str | None] = None
     #: the value of ``null_field`` that makes the effect the identity
     null_value: ClassVar[float] = 0.0
+    #: an empirical component (not in the physical vocabulary): the residual family it was fitted for
+    #: ("column, temporal, additive ..."); None for a named effect
+    family: ClassVar[str | None] = None
 
     def __init_subclass__(cls, **attrs):
         """A card declares its class attributes as keywords of its class statement
@@ -300,6 +305,12 @@ class EffectCard:
     def fit(self, d, model, ctx: FitContext) -> EffectParams | Fit:
         """Parameters fitted on the capture ``d`` (``CaptureData``) given the current ``model``."""
         raise NotImplementedError(f"{self.name}: no fit")
+
+    def variants(self, proposed_by: list) -> list:
+        """The proposing diagnostics (``Discrepancy`` objects, strongest first) to fit a candidate from,
+        one candidate each: an effect with several forms, each seen first by its own diagnostic, is
+        fitted in every form the proposals point to. Default: one candidate, from the strongest."""
+        return [proposed_by[0]]
 
     def marginal(self, p: EffectParams, v: np.ndarray, lin: np.ndarray, model) -> np.ndarray:
         """The marginal variance (DN^2) ``v`` with this effect's term; ``lin``: the expected linear

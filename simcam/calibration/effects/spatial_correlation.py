@@ -10,7 +10,9 @@ stays white. The variance, hence the closed-form marginal, is unchanged.
 
 Fit. Indirect inference: the a whose simulated in-plane lag-1 correlation of dark residuals
 (``lag1_corr``; diluted by quantisation noise, hence no closed form) matches the data, on a grid
-over [0, 0.5]; needs darks.
+over [0, 0.5]; needs darks. Proposed by ``adjacent_corr``, the mosaic kernel is fitted the same way
+on that statistic; where both the in-plane lags and ``adjacent_corr`` propose the effect, both
+kernels are candidates and the held-out comparison picks one.
 
 Profile. ``{type: spatial_correlation, coefficient}``: the loop's ``a`` (same kernel).
 """
@@ -35,6 +37,13 @@ class SpatialCorrelation(EffectParams):
 
 class SpatialCorrelationCard(DeclaredProfileCard, name="spatial_correlation", params=SpatialCorrelation, null_field="a",
                              diagnostics=("lag1_corr", "lag2_corr", "adjacent_corr"), needs_darks=True):
+
+    def variants(self, proposed_by):
+        # the same-colour kernel is seen first by the in-plane lags, the mosaic kernel by adjacent_corr (and,
+        # weakly, by the in-plane lags: a^2 at 2 px): both are fitted where both kinds propose it
+        adjacent = [d for d in proposed_by if d.name == "adjacent_corr"]
+        in_plane = [d for d in proposed_by if d.name != "adjacent_corr"]
+        return adjacent[:1] + in_plane[:1]
 
     def fit(self, d, model, ctx):
         hood = "adjacent" if ctx.diagnostic == "adjacent_corr" else None

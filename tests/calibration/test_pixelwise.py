@@ -1,0 +1,45 @@
+"""The battery's numba kernels against the numpy forms they replace."""
+
+import numpy as np
+import pytest
+
+from simcam.calibration.pixelwise import temporal_median, two_level_split
+
+
+@pytest.mark.parametrize("n", [2, 3, 8, 15, 16])
+def test_temporal_median_is_numpy_median(n):
+    rng = np.random.default_rng(n)
+    x = np.round(rng.normal(100, 3, (n, 17, 23)))  # integer codes: many ties
+    x[:, 0, 0] = 7.0  # a constant pixel
+    assert np.array_equal(temporal_median(x.astype(np.float32)), np.median(x, axis=0))
+
+
+def _two_level_numpy(v, sigma2, min_level=2, gap_sigma=5.0, level_var=2.0):
+    """The closed form written out with numpy: every cut of the sorted series, least within-level SS."""
+    n = v.shape[0]
+    s = np.sort(v, axis=0)
+    best = np.full(v.shape[1:], np.inf)
+    gap = np.zeros(v.shape[1:])
+    high = np.zeros(v.shape[1:], np.int64)
+    for k in range(min_level, n - min_level + 1):
+        lo, hi = s[:k], s[k:]
+        w = ((lo - lo.mean(0)) ** 2).sum(0) + ((hi - hi.mean(0)) ** 2).sum(0)
+        better = w < best
+        best = np.where(better, w, best)
+        gap = np.where(better, hi.mean(0) - lo.mean(0), gap)
+        high = np.where(better, n - k, high)
+    mask = (gap >= gap_sigma * np.sqrt(sigma2)) & (best / max(n - 2, 1) <= level_var * sigma2)
+    return mask, gap, high
+
+
+def test_two_level_split_finds_telegraph_pixels():
+    rng = np.random.default_rng(5)
+    v = rng.normal(0, 1, (16, 4000))
+    tele = rng.random(4000) < 0.1
+    v[:, tele] += 9.0 * (rng.random((16, tele.sum())) < 0.4)
+    mask, gap, high = two_level_split(v, 1.0)
+    want = _two_level_numpy(v, 1.0)
+    assert np.array_equal(mask, want[0]) and np.allclose(gap, want[1]) and np.array_equal(high, want[2])
+    # pixels that did switch (>= 2 frames on each level) are found; white-noise pixels are not
+    switched = tele & (np.sum(v > 4.5, axis=0) >= 2) & (np.sum(v > 4.5, axis=0) <= 14)
+    assert mask[switched].mean() > 0.95 and mask[~tele].mean() < 0.001
