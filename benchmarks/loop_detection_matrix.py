@@ -3,7 +3,8 @@
 Capture set per case: 64x64 RGGB 10-bit sensor (K = 2 DN/e-, read 3 DN, black 64 DN), one dark
 and four flat sequences of 12 frames (6 fit / 6 held out), made by the test-owned generator
 ``tests/calibration/loop_generator.py`` (independent of simcam's noise code). The loop runs with its defaults
-(16 bootstrap replicates, Holm at alpha = 0.01).
+(12 held-out replicates per scored model, which are also the bootstrap null here: 6 fit / 6 held-out
+frames per sequence; Holm at alpha = 0.01).
 
 Run: ``python benchmarks/loop_detection_matrix.py [--seeds 7,8,9]`` (capture-noise seeds; the
 first prints the full table with fitted parameters, the others only the summary). Columns: the

@@ -1113,7 +1113,8 @@ def compute_all(d: CaptureData, names=DIAGNOSTICS, reasons: dict | None = None) 
 class Discrepancy:
     """Standardised discrepancy of a diagnostic: z = (T_data - mean_sim) / (sd_sim * sqrt(1 + 1/R));
     under the model z follows Student t with R - 1 degrees of freedom (predictive interval of a
-    new draw from R simulated ones), giving the two-sided p-value."""
+    new draw from R simulated ones), giving the two-sided p-value (upper tail only for
+    :data:`UPPER_TAIL`)."""
 
     name: str
     value: float
@@ -1124,12 +1125,18 @@ class Discrepancy:
     significant: bool = False
 
 
+#: diagnostics tested on their upper tail only: only an effect raises them, and a value below the null is
+#: the skew of the statistic itself (``dark_checker_jitter`` is the log of a mean of a few chi-square(1)
+#: terms, one per dark frame: its left tail is long, and a 6-frame dark set reached z = -5 with no effect)
+UPPER_TAIL = frozenset({"dark_checker_jitter"})
+
+
 def discrepancy(name: str, value: float, sims: list[float], floor: float) -> Discrepancy:
     s = np.asarray(sims, dtype=np.float64)
     R = s.size
     sd = max(float(s.std(ddof=1)), floor)
     z = (value - float(s.mean())) / (sd * np.sqrt(1 + 1 / R))
-    p = float(2 * sst.t.sf(abs(z), R - 1))
+    p = float(sst.t.sf(z, R - 1) if name in UPPER_TAIL else 2 * sst.t.sf(abs(z), R - 1))
     return Discrepancy(name, float(value), float(s.mean()), sd, float(z), p)
 
 

@@ -63,7 +63,7 @@ from .simulate import simulate_capture
 @dataclass
 class LoopConfig:
     replicates: int = 16
-    heldout_replicates: int = 16  # held-out simulations per model scored (attribution by model comparison)
+    heldout_replicates: int = 12  # held-out simulations per model scored (attribution by model comparison)
     alpha: float = 0.01
     max_iterations: int = 10
     seed: int = 0
@@ -265,6 +265,8 @@ RACE_REPLICATES = 4
 #: a candidate leaves the race when its gain is this many combined SEs behind the leader's, or this many of
 #: its own SEs below :data:`attribution.MIN_GAIN`
 RACE_Z = 5.0
+#: the least standard error (nats) the race takes a stage-one gain to have
+RACE_SE_FLOOR = 1.0
 
 
 def _threads(cfg: LoopConfig) -> int:
@@ -469,9 +471,10 @@ class Loop:
             lead = max(runs, key=lambda t: t[0]["heldout_gain"])[0]
             for rec, _cand, run in runs:
                 behind = lead["heldout_gain"] - rec["heldout_gain"]
-                if behind > RACE_Z * np.hypot(lead["heldout_gain_sd"], rec["heldout_gain_sd"]):
+                # (an SE from 4 replicate pairs can come out near 0 by chance: at least RACE_SE_FLOOR nats)
+                if behind > RACE_Z * max(np.hypot(lead["heldout_gain_sd"], rec["heldout_gain_sd"]), RACE_SE_FLOOR):
                     rec["left_race"] = f"{behind:.3g} nats behind {lead['effect']} after {first} replicates"
-                elif rec["heldout_gain"] + RACE_Z * rec["heldout_gain_sd"] < MIN_GAIN:
+                elif rec["heldout_gain"] + RACE_Z * max(rec["heldout_gain_sd"], RACE_SE_FLOOR) < MIN_GAIN:
                     rec["left_race"] = f"gain below {MIN_GAIN:g} nats by > {RACE_Z:g} SE after {first} replicates"
                 else:
                     self._score(rec, run.extend(R), held_cur)

@@ -1,7 +1,7 @@
 """The calibration loop on capture sets with undeclared effects (test-owned generator).
 
-Each case runs the whole loop (base fit, 16-replicate bootstrap per evaluation, Holm at
-alpha = 0.01, held-out before/after). The generator's effect sizes are several times the
+Each case runs the whole loop (base fit, 12 held-out replicates per scored model, doubling as the
+bootstrap null, Holm at alpha = 0.01, held-out before/after). The generator's effect sizes are several times the
 detection floor of a 64x64, 12-frame set, so the outcome at the fixed seeds is not a coin
 flip; the full matrix (13 effects alone + 7 pairs) is the slow test below and
 ``benchmarks/loop_detection_matrix.py``.
