@@ -73,6 +73,7 @@ class LoopConfig:
     progress: bool | None = None  # progress bars (None: when the output is a terminal)
     kl_tolerance: float = 0.10  # relative growth of held-out KL still accepted (plus twice its sampling floor)
     threads: int | None = None  # replicates simulated at once (None: the cores this process may use)
+    maps: bool = False  # keep the measured fixed patterns in maps.npz beside profile.yaml (simcam.calibration.maps)
 
     def region(self) -> Region:
         """The pixels the residual battery and the bootstrap analyse (:mod:`simcam.calibration.region`)."""
@@ -93,6 +94,7 @@ class GroupResult:
     heldout_base: dict = field(default_factory=dict)
     heldout_final: dict = field(default_factory=dict)
     not_applicable: dict = field(default_factory=dict)  # diagnostic -> reason
+    bootstrap_null: str = ""  # what the residual battery's null was drawn from
 
 
 def _t(s: Sequence) -> float:
@@ -267,6 +269,8 @@ RACE_REPLICATES = 4
 RACE_Z = 5.0
 #: the least standard error (nats) the race takes a stage-one gain to have
 RACE_SE_FLOOR = 1.0
+#: a candidate whose gain is above this many SEs (and MIN_GAIN) but not GAIN_Z gets twice the replicates
+UNCERTAIN_Z = 1.5
 
 
 def _threads(cfg: LoopConfig) -> int:
@@ -336,7 +340,7 @@ class HeldOut:
         out = {"kl": kl, "nll": nll_per_dim(g.held, self.specs, self.model), "kl_floor": floor,
                "kl_excess": max(kl - floor, 0.0), "kl_structured": st["kl"], "structured": st["families"],
                "real_noise": _thin(self.real), "model_noise": _thin(np.concatenate(self.plot), 2 * PLOT_VALUES),
-               "sims": dict(self.sims), "replicates": self.done}
+               "sims": dict(self.sims), "replicates": self.done, "_run": self}
         for name in self.diagnostics:
             vals = self.sims[name]
             if loop.held_stats.get(name) is None or any(v is None for v in vals):
@@ -478,6 +482,16 @@ class Loop:
                     rec["left_race"] = f"gain below {MIN_GAIN:g} nats by > {RACE_Z:g} SE after {first} replicates"
                 else:
                     self._score(rec, run.extend(R), held_cur)
+        for rec, _cand, run in runs:
+            # a gain short of GAIN_Z SEs but beyond UNCERTAIN_Z: the replicates are doubled for it and for the
+            # current model, and the comparison is made again (the jackknife SE of 12 pairs is itself noisy)
+            if "left_race" in rec or rec["_beats"] or run.done < R:
+                continue
+            if rec["heldout_gain"] > MIN_GAIN and rec["heldout_gain"] > UNCERTAIN_Z * rec["heldout_gain_sd"]:
+                cur = held_cur["_run"]
+                if cur.done < 2 * R:
+                    held_cur.update(cur.extend(2 * R).result())
+                self._score(rec, run.extend(2 * R), held_cur)
         out = []
         for rec, cand, run in runs:
             held = run.result()
@@ -496,6 +510,10 @@ class Loop:
         base = base_fit(self.g.fit_data)
         model = start if start is not None else base
         res = GroupResult(self.iso, base, model)
+        res.bootstrap_null = (f"the current model's {cfg.heldout_replicates} held-out replicates (the fit and held-out "
+                              "halves share a layout: every sequence an even number of >= 4 frames)"
+                              if self.g.same_layout else
+                              f"{cfg.replicates} captures simulated on the fit frames' layout per model")
         tag = 0
         held_cur = self.heldout(model, tuple(self.applicable))
         discs = self.evaluate(model, tag, held_cur)

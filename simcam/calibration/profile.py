@@ -58,12 +58,31 @@ def noise_entry(model: LoopModel) -> tuple[dict, list[str]]:
     return {"type": "composite", "base": base, "effects": effects}, notes
 
 
-def noise_profile(results, capture, camera_id: str | None = None) -> dict:
-    """A ``simcam.profiles`` schema-1 document of the final models (one camera, one entry per ISO)."""
+#: effect types measured maps go before (the offsets and the ADC end the signal chain)
+_MAPS_BEFORE = ("black_level_offset", "quantization", "adc_dnl", "empirical_code")
+
+
+def with_maps(entry: dict, maps: dict) -> dict:
+    """``entry`` (a noise-stage model entry) with the effects ``maps["replaces"]`` names replaced by the
+    measured-map entries ``maps["effects"]`` (:mod:`simcam.calibration.maps`)."""
+    if entry["type"] != "composite":
+        entry = {"type": "composite", "base": entry, "effects": []}
+    effects = [e for e in entry["effects"] if e["type"] not in maps["replaces"]]
+    at = next((i for i, e in enumerate(effects) if e["type"] in _MAPS_BEFORE), len(effects))
+    effects[at:at] = [dict(e) for e in maps["effects"]]
+    return dict(entry, effects=effects)
+
+
+def noise_profile(results, capture, camera_id: str | None = None, maps: dict | None = None) -> dict:
+    """A ``simcam.profiles`` schema-1 document of the final models (one camera, one entry per ISO);
+    ``maps``: per ISO, measured maps replacing effects (``simcam loop --maps``, :func:`with_maps`)."""
     first = results[0].model
     entries, notes = [], []
     for r in results:
         entry, n = noise_entry(r.model)
+        if maps and r.iso in maps:
+            entry = with_maps(entry, maps[r.iso])
+            n = n + [f"measured maps ({', '.join(maps[r.iso]['replaces'])} replaced by this sensor's patterns)"]
         iso = float(r.iso) if r.iso > 0 else 100.0
         if r.iso <= 0:
             notes.append("ISO unknown in the data: entry stored at ISO 100")

@@ -108,6 +108,7 @@ def build_report(results: list[GroupResult], capture, cfg: LoopConfig, emva: dic
             "iso": int(r.iso),
             "iso_label": iso_label(r.iso),
             "analysed": r.plots["group"].region,
+            "bootstrap_null": r.bootstrap_null,
             "iterations": [{k: v for k, v in it.items()} for it in r.iterations],
             "effects": list(r.model.effects),
             "unexplained": [{"diagnostic": u["diagnostic"], "discrepancy": u["discrepancy"], "reason": u["reason"]}
@@ -177,6 +178,7 @@ def loop_model_dict(results: list[GroupResult], capture, camera_id: str | None =
             "iso": int(r.iso),
             "iso_label": iso_label(r.iso),
             "analysed": r.plots["group"].region,
+            "bootstrap_null": r.bootstrap_null,
             "model": {"type": "poisson_gaussian", "beta1": float(m.K / fs), "beta2": float(m.read_dn ** 2 / fs ** 2)},
             "K_dn_per_e": float(m.K), "read_dn": float(m.read_dn),
             "black_level": [float(x) for x in np.asarray(m.black_dn).ravel()],
@@ -567,7 +569,9 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
              " td.l{text-align:left} .sig{background:#fdd}</style></head><body>",
              f"<h1>simcam loop report</h1><p>Capture set <code>{html.escape(doc['capture_set'])}</code> "
              f"({doc['layout']}). Significance: {doc['settings']['correction']} at alpha = {doc['settings']['alpha']}"
-             f", {doc['settings']['replicates']} bootstrap replicates. Pixel marginal KL: {html.escape(doc['kl_binning'])}. "
+             f", bootstrap null: the model's {doc['settings']['heldout_replicates']} held-out replicates where the fit and "
+             f"held-out halves share a layout, else {doc['settings']['replicates']} captures simulated on the fit frames. "
+             f"Pixel marginal KL: {html.escape(doc['kl_binning'])}. "
              f"Structured marginal KL: {html.escape(doc['structured_kl'])}.</p>"]
     for note in doc["notes"]:
         parts.append(f"<p><b>Note:</b> {html.escape(note)}</p>")
@@ -590,6 +594,8 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
             parts.append(f"<p>Pixels analysed by the residual battery and the bootstrap: {a['pixels_analysed']:,} of "
                          f"{a['frame'][0]} × {a['frame'][1]} ({100 * a['fraction']:.3g} %), {html.escape(a['layout'])}. "
                          "EMVA 1288 numbers and the dark current use every pixel of every frame.</p>")
+        if g.get("bootstrap_null"):
+            parts.append(f"<p>Bootstrap null of the residual battery: {html.escape(g['bootstrap_null'])}.</p>")
         parts.append(_model_table(g))
         parts.append(_dark_table(g.get("dark_current")))
         parts.append(emva1288_r4_html(g.get("emva1288")))
@@ -738,7 +744,17 @@ def run_and_write(capture_dir: str | Path, out_dir: str | Path, *, start_profile
     out_dir.mkdir(parents=True, exist_ok=True)
     from .profile import noise_profile
 
-    write_yaml(out_dir / "profile.yaml", noise_profile(results, capture))
+    maps = None
+    if cfg.maps:
+        from .maps import MAPS_FILE, measured_maps
+
+        arrays, maps, map_notes = measured_maps(capture, results)
+        doc["notes"] = doc["notes"] + map_notes
+        if arrays:
+            tmp = out_dir / (MAPS_FILE + ".part.npz")
+            np.savez_compressed(tmp, **arrays)
+            tmp.replace(out_dir / MAPS_FILE)
+    write_yaml(out_dir / "profile.yaml", noise_profile(results, capture, maps=maps))
     write_yaml(out_dir / "loop_model.yaml", loop_model_dict(results, capture))
     (out_dir / "report.json").write_text(json.dumps(doc, indent=2))
     figs = {r.iso: figures(r, cfg.seed) for r in results}

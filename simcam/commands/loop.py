@@ -25,6 +25,9 @@ def loop(
                                           help="Batch: dask worker processes (default: one per core; 0: serial)."),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Batch: dask scheduler address."),
     resume: bool = typer.Option(False, "--resume", help="Batch: skip capture sets whose report exists."),
+    maps: bool = typer.Option(False, "--maps", help="Keep this sensor's measured fixed patterns (dark offset map: DSNU, "
+                              "column offsets, hot pixels; flat gain map: PRNU) in maps.npz beside profile.yaml, so "
+                              "the noise stage reproduces them instead of drawing new ones."),
 ) -> None:
     """Fit a noise model to measured frames, find and attribute its residuals, refit, report before/after."""
     from ..errors import DatasetError
@@ -40,7 +43,7 @@ def loop(
         raise DatasetError(f"--max-size {max_size}: expected >= 16 pixels")
     if max_pixels < 64 * 64:
         raise DatasetError(f"--max-pixels {max_pixels}: expected >= 4096 pixels")
-    cfg = dict(replicates=replicates, alpha=alpha, seed=seed, max_size=max_size, max_pixels=max_pixels)
+    cfg = dict(replicates=replicates, alpha=alpha, seed=seed, max_size=max_size, max_pixels=max_pixels, maps=maps)
     start = None if start_profile is None else str(start_profile)
     if len(capture_dir) > 1:
         raise typer.Exit(_loop_batch(capture_dir, out, cfg, start, workers=workers, scheduler=scheduler,

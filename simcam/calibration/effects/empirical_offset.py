@@ -70,6 +70,14 @@ class EmpiricalOffsetCard(EffectCard, name="empirical_offset", params=EmpiricalO
         q -= quantile_table_moments(q)[0]
         return EmpiricalOffset(quantiles_dn=[float(x) for x in q])
 
+    def format(self, p):
+        if not isinstance(p, EffectParams):
+            p = self.params.from_dict(p)
+        q = np.asarray(p.quantiles_dn, dtype=np.float64)
+        sd = np.sqrt(quantile_table_moments(q)[1])
+        return (f"quantiles_dn = {q.size} quantiles, sd {sd:.3g} DN, from {q[0]:.3g} to {q[-1]:.3g} DN, median "
+                f"{float(np.interp(0.5, np.linspace(0, 1, q.size), q)):.3g} DN; axis = {p.axis}")
+
     def is_null(self, p):
         return quantile_table_moments(p.quantiles_dn)[1] <= 0.0
 

@@ -1,0 +1,104 @@
+"""Measured fixed patterns kept beside the profile (``simcam loop --maps``).
+
+The loop's effects describe a sensor's fixed patterns by their statistics (a DSNU sigma, a PRNU
+sigma, a column-FPN sigma, a hot-pixel share), and the noise stage draws a new pattern of that law
+from the sensor seed: a camera of the same *model*. With ``--maps`` the profile keeps *this*
+sensor's patterns, measured on the whole frame (EMVA 1288 Release 4.0, sec. 8: the dark and the
+bright temporal-mean images, from which the standard's DSNU and PRNU are computed; A. Abdelhamed,
+*Noise Modelling for Smartphone Cameras*, PhD dissertation, York University, 2020, ch. 3: noise
+parameters measured per sensor), in ``maps.npz`` beside ``profile.yaml``:
+
+* ``iso<N>_dark_offset`` (normalised raw): the temporal-mean image of the darks at the shortest
+  exposure time minus its per-CFA-site median: DSNU, column offsets and hot pixels as this sensor
+  has them. It replaces the model's ``dsnu``, ``column_fpn`` and ``hot_pixels`` entries by one
+  ``empirical_offset`` ``{axis: pixel, map}`` entry (a hot pixel keeps its level at that exposure:
+  its growth with the exposure time is not in the map).
+* ``iso<N>_flat_gain`` (around 1): the flat's temporal-mean image minus the dark's, divided by its
+  per-site median: PRNU as this sensor has it. It replaces ``prnu`` by ``empirical_gain``
+  ``{axis: pixel, map}``.
+
+Each map also holds the temporal noise of its frames' mean (variance sigma_t^2 / n per pixel, as
+the standard's images do): with 16 dark frames and a DSNU comparable to the read noise, about 6 %
+of the map's variance. A map is written only for an effect the loop added; an ISO without the frames
+it needs keeps its parametric entries (the profile's notes say which).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .diagnostics import PLANE_OFFSETS
+
+#: effects a dark offset map replaces, and those a flat gain map replaces
+DARK_EFFECTS = ("dsnu", "column_fpn", "hot_pixels")
+FLAT_EFFECTS = ("prnu",)
+MAPS_FILE = "maps.npz"
+
+
+def _site_median(m: np.ndarray, cfa: bool) -> np.ndarray:
+    out = np.empty_like(m)
+    if not cfa:
+        out[...] = np.median(m)
+        return out
+    for dy, dx in PLANE_OFFSETS:
+        out[dy::2, dx::2] = np.median(m[dy::2, dx::2])
+    return out
+
+
+def _mosaic(stats: list, cfa: str | None, shape: tuple[int, int]) -> np.ndarray:
+    """The whole-frame temporal-mean image from the EMVA 1288 point statistics' per-channel mean maps."""
+    from .emva1288 import cfa_channels
+
+    out = np.empty(shape)
+    for st, (_name, dy, dx) in zip(stats, cfa_channels(cfa)):
+        step = 2 if cfa is not None else 1
+        out[dy::step, dx::step] = st.mean_map
+    return out
+
+
+def _exposure(s) -> float:
+    return float(s.exposure_s) if s.exposure_s is not None else -1.0
+
+
+def measured_maps(capture, results) -> tuple[dict[str, np.ndarray], dict[int, dict], list[str]]:
+    """(arrays for ``maps.npz``, per ISO ``{"replaces": [effect types], "effects": [entries]}``, notes)."""
+    arrays: dict[str, np.ndarray] = {}
+    per_iso: dict[int, dict] = {}
+    notes: list[str] = []
+    for r in results:
+        m, fs = r.model, r.model.full_scale_dn
+        cfa = m.cfa is not None
+        group = capture.group(r.iso)
+        darks = [s for s in group if s.kind == "dark" and s.stats().mean_map is not None]
+        flats = [s for s in group if s.kind == "flat" and s.emva_stats and s.emva_stats[0].mean_map is not None]
+        tag = f"iso{int(r.iso)}" if r.iso > 0 else "iso_unknown"
+        replaces, effects = [], []
+        dark = min(darks, key=_exposure) if darks else None
+        if any(e in m.effects for e in DARK_EFFECTS):
+            if dark is None:
+                notes.append(f"ISO {r.iso}: no dark sequence: the dark offset map is not written")
+            else:
+                dm = dark.stats().mean_map.astype(np.float64)
+                arrays[f"{tag}_dark_offset"] = ((dm - _site_median(dm, cfa)) / fs).astype(np.float32)
+                replaces += [e for e in DARK_EFFECTS if e in m.effects]
+                effects.append({"type": "empirical_offset", "axis": "pixel", "map": f"{MAPS_FILE}#{tag}_dark_offset"})
+        if any(e in m.effects for e in FLAT_EFFECTS):
+            if not flats or dark is None:
+                notes.append(f"ISO {r.iso}: the flat gain map needs a flat with its exposure time and a dark: not "
+                             "written")
+            else:
+                f = max(flats, key=lambda s: s.n)
+                same_t = [s for s in darks if _exposure(s) == _exposure(f)]
+                base = (same_t[0] if same_t else dark).stats().mean_map.astype(np.float64)
+                resp = _mosaic(f.emva_stats, m.cfa, base.shape) - base
+                med = _site_median(resp, cfa)
+                if not np.all(med > 0):
+                    notes.append(f"ISO {r.iso}: the flat is not above the dark level on every CFA site: the flat "
+                                 "gain map is not written")
+                else:
+                    arrays[f"{tag}_flat_gain"] = (resp / med).astype(np.float32)
+                    replaces += [e for e in FLAT_EFFECTS if e in m.effects]
+                    effects.append({"type": "empirical_gain", "axis": "pixel", "map": f"{MAPS_FILE}#{tag}_flat_gain"})
+        if replaces:
+            per_iso[r.iso] = {"replaces": replaces, "effects": effects}
+    return arrays, per_iso, notes
