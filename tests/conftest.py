@@ -17,6 +17,12 @@ def shared_file():
     return shared_path
 
 
+def pytest_configure(config):
+    # the test run already puts one process on each core (pytest -n 2): the calibration loop's replicates run
+    # on one thread per process unless a test asks for more (its results do not depend on the count)
+    os.environ.setdefault("SIMCAM_LOOP_THREADS", "1")
+
+
 def pytest_collection_modifyitems(config, items):
     if os.environ.get("SIMCAM_SLOW") == "1":
         return

@@ -72,7 +72,7 @@ class LoopConfig:
     tile: int = DEFAULT_TILE
     progress: bool | None = None  # progress bars (None: when the output is a terminal)
     kl_tolerance: float = 0.10  # relative growth of held-out KL still accepted (plus twice its sampling floor)
-    threads: int | None = None  # replicates simulated at once (None: the cores this process may use)
+    threads: int | None = None  # replicates simulated at once (None: $SIMCAM_LOOP_THREADS, else the cores this process may use)
     maps: bool = False  # keep the measured fixed patterns in maps.npz beside profile.yaml (simcam.calibration.maps)
 
     def region(self) -> Region:
@@ -273,9 +273,21 @@ RACE_SE_FLOOR = 1.0
 UNCERTAIN_Z = 1.5
 
 
+#: environment variable that sets the loop's default thread count (e.g. 1 where processes already share the cores)
+THREADS_ENV = "SIMCAM_LOOP_THREADS"
+
+
 def _threads(cfg: LoopConfig) -> int:
     if cfg.threads is not None:
         return max(1, int(cfg.threads))
+    env = os.environ.get(THREADS_ENV, "").strip()
+    if env:
+        try:
+            return max(1, int(env))
+        except ValueError:
+            from ..errors import DatasetError
+
+            raise DatasetError(f"environment {THREADS_ENV}={env!r}: expected a whole number of threads") from None
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # not on Linux

@@ -195,11 +195,13 @@ def test_black_level_repeat_dim_is_bounded(name, seed_dir, tmp_path):
 
 @pytest.mark.parametrize("name", ["gainmaps_50000_list1", "gainmaps_50000_list2", "gainmaps_50000_list3"])
 def test_fifty_thousand_tiny_gain_maps_render_fast(name, seed_dir, tmp_path):
-    """50,000 one-point GainMaps took 13-17 s (a deep copy of every map per stage, a loop per map)."""
+    """50,000 one-point GainMaps took 13-17 s (a deep copy of every map per stage, a loop per map); now 2-3 s
+    alone. The bound guards against that pathology, not a speed target (timings live in benchmarks/): 12 s,
+    since a CI run sharing the 2 cores with other tests once measured 5.9 s."""
     path = build(name, seed_dir, tmp_path)
     t0 = time.perf_counter()
     rgb = simcam.render(path)
-    assert time.perf_counter() - t0 < 5.0
+    assert time.perf_counter() - t0 < 12.0
     assert np.all(np.isfinite(rgb))
 
 
