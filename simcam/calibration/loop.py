@@ -306,12 +306,16 @@ class HeldOut:
         self.loop, self.model, self.diagnostics, self.label = loop, model, tuple(diagnostics), label
         self.specs = g.specs(model, g.held)
         real_f = noise_frames(g.held, [f for _, f, _ in g.held], self.specs, model)
-        self.real = np.concatenate([x.ravel() for x in real_f])
-        self.n_counts = np.histogram(self.real, KL_EDGES)[0]
+        real = np.concatenate([x.ravel() for x in real_f])
+        self.n_real = real.size
+        self.real_thin = _thin(real)  # (the object stays alive as the current model's: no full copies kept)
+        self.n_counts = np.histogram(real, KL_EDGES)[0]
+        del real
         self.m_counts = np.zeros_like(self.n_counts)
         self.m_size = 0
         self.plot: list[np.ndarray] = []  # the first replicates' values, up to twice the data's count
         self.plot_size = 0
+        self.model_thin = None
         self.st = StructuredKL(real_f, [sp.fixed_in_clean for sp in self.specs])
         self.sims: dict[str, list] = {name: [] for name in self.diagnostics}
         self.done = 0
@@ -323,7 +327,7 @@ class HeldOut:
         nf = noise_frames(g.held, sims, specs, model)
         counts = sum(np.histogram(x, KL_EDGES)[0] for x in nf)
         size = sum(x.size for x in nf)
-        plot = np.concatenate([x.ravel() for x in nf]) if r * self.real.size < 2 * self.real.size else None
+        plot = np.concatenate([x.ravel() for x in nf]) if r * self.n_real < 2 * self.n_real else None
         st = self.st.counts(nf)
         stats = dg.compute_all(_capture(g, g.held, sims, specs), self.diagnostics) if self.diagnostics else {}
         return counts, size, plot, st, stats
@@ -334,8 +338,8 @@ class HeldOut:
         for counts, size, plot, st, stats in self.loop.map(self._one, rs, f"held-out, {self.label}"):
             self.m_counts += counts
             self.m_size += size
-            if plot is not None and self.plot_size < 2 * self.real.size:
-                take = plot[: 2 * self.real.size - self.plot_size]
+            if plot is not None and self.plot_size < 2 * self.n_real:
+                take = plot[: 2 * self.n_real - self.plot_size]
                 self.plot.append(take)
                 self.plot_size += take.size
             self.st.add_counts(st)
@@ -347,11 +351,14 @@ class HeldOut:
     def result(self) -> dict:
         loop, g = self.loop, self.loop.g
         kl = kl_counts(self.n_counts, self.m_counts)
-        floor = kl_floor(self.n_counts + self.m_counts, self.real.size, self.m_size)
+        floor = kl_floor(self.n_counts + self.m_counts, self.n_real, self.m_size)
         st = self.st.result()
+        if self.plot:  # thinned once; the full values are dropped (the first replicates fill the plot)
+            self.model_thin = _thin(np.concatenate(self.plot), 2 * PLOT_VALUES)
+            self.plot = []
         out = {"kl": kl, "nll": nll_per_dim(g.held, self.specs, self.model), "kl_floor": floor,
                "kl_excess": max(kl - floor, 0.0), "kl_structured": st["kl"], "structured": st["families"],
-               "real_noise": _thin(self.real), "model_noise": _thin(np.concatenate(self.plot), 2 * PLOT_VALUES),
+               "real_noise": self.real_thin, "model_noise": self.model_thin,
                "sims": dict(self.sims), "replicates": self.done, "_run": self}
         for name in self.diagnostics:
             vals = self.sims[name]
