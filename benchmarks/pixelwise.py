@@ -9,12 +9,16 @@ Usage::
 
 from __future__ import annotations
 
-import platform
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
 from simcam.calibration.pixelwise import temporal_median, two_level_split
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/machine.py
+from machine import cpu_model  # noqa: E402
 
 
 def _numpy_two_level(v, sigma2, min_level=2):
@@ -43,22 +47,12 @@ def _median_time(fn, reps=7):
     return float(np.median(ts))
 
 
-def _cpu() -> str:
-    try:
-        for line in open("/proc/cpuinfo"):
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
-
-
 def main() -> None:
     x = np.round(np.random.default_rng(0).normal(100, 3, (16, 384, 512))).astype(np.float32)
     v = x.reshape(16, -1).astype(np.float64)
     temporal_median(x[:, :2, :2])
     two_level_split(v[:, :4], 9.0)  # compile
-    print(f"CPU: {_cpu()}")
+    print(f"CPU: {cpu_model()}")
     print("| kernel | numpy (ms) | simcam (ms) | ratio |")
     print("|---|---|---|---|")
     for name, ref, new in (

@@ -229,12 +229,17 @@ class CaptureData:
         return self.cache["ptc"]
 
 
+def plane_medians(m: np.ndarray) -> np.ndarray:
+    """Each 2x2-site plane's median, as a map of ``m``'s shape (``m``'s float dtype, else float64)."""
+    out = np.empty(m.shape, dtype=m.dtype if np.issubdtype(m.dtype, np.floating) else np.float64)
+    for dy, dx in PLANE_OFFSETS:
+        out[dy::2, dx::2] = np.median(m[dy::2, dx::2])
+    return out
+
+
 def plane_centre(m: np.ndarray) -> np.ndarray:
     """Subtract each 2x2-site plane's median."""
-    out = m.copy()
-    for dy, dx in PLANE_OFFSETS:
-        out[dy::2, dx::2] -= np.median(out[dy::2, dx::2])
-    return out
+    return m - plane_medians(m)
 
 
 def robust_sigma(x: np.ndarray) -> float:

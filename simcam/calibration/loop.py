@@ -285,8 +285,6 @@ def _threads(cfg: LoopConfig) -> int:
         try:
             return max(1, int(env))
         except ValueError:
-            from ..errors import DatasetError
-
             raise DatasetError(f"environment {THREADS_ENV}={env!r}: expected a whole number of threads") from None
     try:
         return max(1, len(os.sched_getaffinity(0)))
@@ -327,7 +325,8 @@ class HeldOut:
         nf = noise_frames(g.held, sims, specs, model)
         counts = sum(np.histogram(x, KL_EDGES)[0] for x in nf)
         size = sum(x.size for x in nf)
-        plot = np.concatenate([x.ravel() for x in nf]) if r * self.n_real < 2 * self.n_real else None
+        # each replicate holds as many values as the data: the first two fill the figures' sample
+        plot = np.concatenate([x.ravel() for x in nf]) if r < 2 else None
         st = self.st.counts(nf)
         stats = dg.compute_all(_capture(g, g.held, sims, specs), self.diagnostics) if self.diagnostics else {}
         return counts, size, plot, st, stats

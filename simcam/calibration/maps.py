@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .diagnostics import PLANE_OFFSETS
+from .diagnostics import plane_medians
 
 #: effects a dark offset map replaces, and those a flat gain map replaces
 DARK_EFFECTS = ("dsnu", "column_fpn", "hot_pixels")
@@ -36,13 +36,8 @@ MAPS_FILE = "maps.npz"
 
 
 def _site_median(m: np.ndarray, cfa: bool) -> np.ndarray:
-    out = np.empty_like(m)
-    if not cfa:
-        out[...] = np.median(m)
-        return out
-    for dy, dx in PLANE_OFFSETS:
-        out[dy::2, dx::2] = np.median(m[dy::2, dx::2])
-    return out
+    """Each CFA site's median as a map (:func:`diagnostics.plane_medians`); a monochrome frame's median."""
+    return plane_medians(m) if cfa else np.full(m.shape, np.median(m))
 
 
 def _mosaic(stats: list, cfa: str | None, shape: tuple[int, int]) -> np.ndarray:

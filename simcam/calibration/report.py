@@ -178,7 +178,6 @@ def loop_model_dict(results: list[GroupResult], capture, camera_id: str | None =
             "iso": int(r.iso),
             "iso_label": iso_label(r.iso),
             "analysed": r.plots["group"].region,
-            "bootstrap_null": r.bootstrap_null,
             "model": {"type": "poisson_gaussian", "beta1": float(m.K / fs), "beta2": float(m.read_dn ** 2 / fs ** 2)},
             "K_dn_per_e": float(m.K), "read_dn": float(m.read_dn),
             "black_level": [float(x) for x in np.asarray(m.black_dn).ravel()],

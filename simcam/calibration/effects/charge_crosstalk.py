@@ -62,10 +62,10 @@ class ChargeCrosstalkCard(DeclaredProfileCard, name="charge_crosstalk", params=C
         return Fit(ChargeCrosstalk(c=c), K=float(model.K / variance_factor(c)))
 
     def marginal(self, p, v, lin, model):
-        # the base's shot term K g_c x drops by the variance factor (g_c tiled over the 2x2 sites)
-        g = np.asarray(model.gains(), dtype=np.float64).reshape(2, 2)
-        h, w = lin.shape[-2:]
-        gmap = np.tile(g, (-(-h // 2), -(-w // 2)))[:h, :w]
+        # the base's shot term K g_c x drops by the variance factor
+        from ...noise.base import site_map
+
+        gmap = site_map(model.gains(), lin.shape[-2:], name="channel gain", dtype=np.float64)
         return v - (1.0 - variance_factor(p.c)) * model.K * gmap * lin
 
     def linear_signal(self, p, y, model):
