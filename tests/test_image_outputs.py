@@ -56,8 +56,69 @@ def test_tiff_carries_icc_exif_and_is_uncompressed(tmp_path):
         assert exif["DateTimeOriginal"] == "2021:05:06 07:08:09"
         num, den = exif["ExposureTime"]
         assert num / den == pytest.approx(0.005, rel=1e-3)
-        # ISO: OpenImageIO's TIFF writer leaves it out of the EXIF IFD (PNG, JPEG and EXR carry it)
+        assert exif["ISOSpeedRatings"] == 400
         np.testing.assert_array_equal(page.asarray(), to_samples(f.data, "uint16"))
+
+
+@pytest.mark.parametrize("compression", [None, "zip:9", "lzw"])
+def test_tiff_exif_read_by_openimageio_and_pillow(tmp_path, compression):
+    # two more independent readers of the EXIF IFD (tifffile's writer leaves it to simcam; LZW goes
+    # through OpenImageIO's writer)
+    import OpenImageIO as oiio
+
+    f = _frame("display")
+    p = write_image(tmp_path / "o.tif", f, depth=16, compression=compression)
+    inp = oiio.ImageInput.open(str(p))
+    spec = inp.spec()
+    pixels = inp.read_image(oiio.UINT16)
+    inp.close()
+    assert spec.getattribute("Make") == "Acme" and spec.getattribute("Model") == "Cam 1"
+    assert spec.getattribute("ExposureTime") == pytest.approx(0.005, rel=1e-6)
+    assert spec.getattribute("Exif:DateTimeOriginal") == "2021:05:06 07:08:09"
+    np.testing.assert_array_equal(pixels, to_samples(f.data, "uint16"))
+    with Image.open(p) as im:
+        assert im.info["icc_profile"] == srgb_icc_profile(False)
+        sub = im.getexif().get_ifd(0x8769)
+        assert sub[0x9003] == "2021:05:06 07:08:09" and float(sub[0x829A]) == pytest.approx(0.005, rel=1e-3)
+        if compression != "lzw":  # OpenImageIO's TIFF writer leaves ISO out of the EXIF IFD
+            assert sub[0x8827] == 400
+
+
+def test_tiff_mono_and_8bit(tmp_path):
+    rng = np.random.default_rng(1)
+    g = rng.uniform(0, 1, (20, 30)).astype(np.float32)
+    p = write_image(tmp_path / "g.tif", g, depth=8)
+    with tifffile.TiffFile(p) as t:
+        assert t.pages[0].photometric == 1 and t.pages[0].dtype == np.uint8
+        np.testing.assert_array_equal(t.pages[0].asarray(), to_samples(g, "uint8"))
+        assert "ExifTag" not in t.pages[0].tags and "ImageDescription" not in t.pages[0].tags
+
+
+@pytest.mark.parametrize("bigtiff", [False, True])
+def test_tiff_writer_exif_ifd_classic_and_big(tmp_path, bigtiff):
+    from simcam.io.tiff_write import write_tiff
+
+    s = np.arange(5 * 7 * 3, dtype=np.uint16).reshape(5, 7, 3)
+    p = tmp_path / "t.tif"
+    write_tiff(p, s, tags={"Make": "M", "Software": "simcam", "DateTime": "2020:01:02 03:04:05"}, bigtiff=bigtiff,
+               exif={"ExposureTime": 1 / 250, "FNumber": 2.8, "PhotographicSensitivity": 1600, "FocalLength": 4.25,
+                     "DateTimeOriginal": "2020:01:02 03:04:05"})
+    with tifffile.TiffFile(p) as t:
+        assert t.is_bigtiff == bigtiff
+        tags = t.pages[0].tags
+        assert tags["Make"].value == "M" and tags["DateTime"].value == "2020:01:02 03:04:05"
+        exif = tags["ExifTag"].value
+        assert exif["ExposureTime"] == (1, 250) and exif["FNumber"] == (14, 5) and exif["FocalLength"] == (17, 4)
+        assert exif["ISOSpeedRatings"] == 1600 and exif["DateTimeOriginal"] == "2020:01:02 03:04:05"
+        assert exif["ExifVersion"] in ("0232", b"0232")
+        np.testing.assert_array_equal(t.pages[0].asarray(), s)
+
+
+def test_tiff_same_bytes_twice(tmp_path):
+    f = _frame("display")
+    a = write_image(tmp_path / "a.tif", f, depth=16).read_bytes()
+    b = write_image(tmp_path / "b.tif", f, depth=16).read_bytes()
+    assert a == b
 
 
 def test_linear_tiff_is_marked_linear(tmp_path):

@@ -50,6 +50,17 @@ def test_encode_display_within_one_code_of_the_curve(depth):
     assert np.all(np.abs(exact[off] - np.floor(exact[off]) - 0.5) < bound + 1e-3)
 
 
+@pytest.mark.parametrize("depth", ["uint8", "uint16"])
+def test_code_table_equals_its_definition(depth):
+    # the table is built from where each code begins; every entry must equal the curve at its grid point
+    from simcam.colour.display_kernel import code_table, table_steps
+
+    n, top = table_steps(depth), (255 if depth == "uint8" else 65535)
+    x = np.arange(n + 1, dtype=np.float64) / n
+    y = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(np.maximum(x, 0.0031308), 1 / 2.4) - 0.055)
+    np.testing.assert_array_equal(code_table(depth), np.round(np.clip(y, 0, 1) * top).astype(depth))
+
+
 def test_encode_display_float_and_linear():
     x = _random(1)
     y = encode_display(x, M, lo=None, hi=None, depth="float32")

@@ -49,13 +49,31 @@ def table_steps(depth: str) -> int:
     return 1 << 16 if depth == "uint8" else 1 << 20
 
 
+def srgb_eotf64(y: np.ndarray) -> np.ndarray:
+    """The inverse of :func:`srgb_oetf64` (IEC 61966-2-1), float64."""
+    y = np.asarray(y, dtype=np.float64)
+    return np.where(y <= 12.92 * _SRGB_T, y / 12.92, np.power((np.maximum(y, 0.04045) + 0.055) / 1.055, 2.4))
+
+
 @lru_cache(maxsize=4)
 def code_table(depth: str) -> np.ndarray:
-    """sRGB codes of the linear values ``i / table_steps(depth)``, ``i = 0 .. steps`` (of type ``depth``)."""
+    """sRGB codes of the linear values ``i / table_steps(depth)``, ``i = 0 .. steps`` (of type ``depth``).
+
+    ``table[i] = round(clip(oetf(i / steps), 0, 1) top)``. The codes are non-decreasing in ``i``,
+    so the table is built from where each code begins: the linear value where the curve crosses
+    ``(k - 1/2) / top`` (:func:`srgb_eotf64`), with the two grid points beside each crossing
+    evaluated exactly (a crossing that falls on a grid point, or one rounded the other way). This is
+    65,536 evaluations of the curve instead of 2^20 for 16-bit output (about 3 ms instead of 45 ms
+    a process); ``tests/test_render_fused.py`` checks it against the direct definition.
+    """
     n = table_steps(depth)
     top = 255 if depth == "uint8" else 65535
-    x = np.arange(n + 1, dtype=np.float64) / n
-    t = np.round(np.clip(srgb_oetf64(x), 0.0, 1.0) * top).astype(depth)
+    k = np.arange(1, top + 1, dtype=np.float64)
+    starts = np.clip(np.ceil(srgb_eotf64((k - 0.5) / top) * n), 0, n + 1).astype(np.int64)
+    counts = np.diff(np.concatenate(([0], starts, [n + 1])))
+    t = np.repeat(np.arange(top + 1, dtype=depth), counts)
+    near = np.clip(np.concatenate((starts - 1, starts)), 0, n)  # repeats do no harm
+    t[near] = np.round(np.clip(srgb_oetf64(near / n), 0.0, 1.0) * top).astype(depth)
     t.flags.writeable = False
     return t
 
