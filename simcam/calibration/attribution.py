@@ -21,6 +21,11 @@ moves at least the diagnostics that propose it, so every candidate is scored on 
 the t law's log-density grows only like ``log z`` far in the tails, so a large residual that no
 candidate touches cannot drown the comparison.
 
+Statistics that count pixels (defects, telegraph pixels, the hot-pixel tail) take the negative
+binomial predictive law of a count instead where the replicates are no more dispersed than Poisson
+(:func:`predictive_logpdf`): a model that draws no defects gives a count of 0 in every replicate, and
+the t law's floor would make 5 defective pixels in the data only a 5-sigma event.
+
 Sampling noise
 --------------
 The candidate and the current model are simulated with the same random streams (replicate ``r``
@@ -38,6 +43,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats as sst
+
+from . import diagnostics as dg
 
 #: a candidate is added when its held-out gain exceeds GAIN_Z jackknife standard errors ...
 GAIN_Z = 3.0
@@ -83,13 +90,24 @@ class Comparison:
         return sorted(self.per_diagnostic.items(), key=lambda kv: -abs(kv[1]))[:n]
 
 
+def predictive_logpdf(name: str, value: float, sims: np.ndarray, floor: float) -> float:
+    """Log-density of a statistic's held-out value: the count law of a pixel-share statistic whose
+    replicates are not over-dispersed (:func:`simcam.calibration.diagnostics.count_law`: a probability
+    per count, divided by the one-pixel ``floor`` to be a density on the share's scale), else
+    :func:`t_logpdf`."""
+    law = dg.count_law(name, sims, floor)
+    if law is None:
+        return t_logpdf(value, sims, floor)
+    return float(law.logpmf(int(round(value / floor))) - math.log(floor))
+
+
 def _scores(values: dict, sims: dict, floors: dict, names: list[str], drop: int | None) -> np.ndarray:
     out = np.empty(len(names))
     for i, name in enumerate(names):
         s = np.asarray(sims[name], dtype=np.float64)
         if drop is not None:
             s = np.delete(s, drop)
-        out[i] = t_logpdf(values[name], s, floors[name])
+        out[i] = predictive_logpdf(name, values[name], s, floors[name])
     return out
 
 

@@ -1136,10 +1136,50 @@ class Discrepancy:
 UPPER_TAIL = frozenset({"dark_checker_jitter"})
 
 
+#: statistics that are shares of pixels (a count over the number of pixels, :func:`resolution` being one
+#: pixel): where the replicates count few pixels, tested as counts (:func:`count_law`)
+COUNT_SHARES = frozenset({"defect_pixels", "telegraph_pixels", "hot_pixel_tail"})
+#: the replicates' mean count below which a count statistic takes the count law (above it, the t law on
+#: the replicates' own spread, which also covers over-dispersion)
+COUNT_LAW_MAX_MEAN = 3.0
+
+
+def count_law(name: str, sims: np.ndarray, unit: float):
+    """The predictive law of a new count for a :data:`COUNT_SHARES` statistic, or None (use the t law).
+
+    The replicates' counts (``sims / unit``) are taken as Poisson with rate lambda; with Jeffreys' prior
+    the posterior of lambda is Gamma(S + 1/2, rate R) (S their sum over R replicates), and a new count
+    is negative binomial with ``r = S + 1/2`` and success probability ``R / (R + 1)`` (A. Gelman et al.,
+    *Bayesian Data Analysis*, 3rd ed., sec. 2.6 and 3.7's gamma-Poisson). Where every replicate counts 0
+    defects and the data 5, the t law has only its one-pixel floor for the spread (z = 5, p ~ 5e-4 with
+    15 degrees of freedom); the count law gives p ~ 4e-7. It is used where the replicates' mean count is
+    under :data:`COUNT_LAW_MAX_MEAN` (a few pixels: the t law's continuous spread does not describe a
+    count there) and they are no more dispersed than Poisson; elsewhere the t law on their own spread.
+    """
+    if name not in COUNT_SHARES or not unit > 0 or sims.size < 2:
+        return None
+    c = np.round(np.asarray(sims, dtype=np.float64) / unit)
+    if c.mean() >= COUNT_LAW_MAX_MEAN or c.var(ddof=1) > max(c.mean(), 0.0):
+        return None
+    R = c.size
+    return sst.nbinom(float(c.sum()) + 0.5, R / (R + 1.0))
+
+
+def count_p_value(n_obs: int, law) -> float:
+    """Two-sided p-value of the count ``n_obs`` under the discrete ``law`` (twice the smaller tail)."""
+    return min(1.0, 2.0 * min(float(law.sf(n_obs - 1)), float(law.cdf(n_obs))))
+
+
 def discrepancy(name: str, value: float, sims: list[float], floor: float) -> Discrepancy:
     s = np.asarray(sims, dtype=np.float64)
     R = s.size
     sd = max(float(s.std(ddof=1)), floor)
+    law = count_law(name, s, floor)
+    if law is not None:
+        p = count_p_value(int(round(value / floor)), law)
+        diff = value - float(s.mean())
+        z = float(np.sign(diff) * sst.t.isf(p / 2, R - 1)) if p < 1 else 0.0
+        return Discrepancy(name, float(value), float(s.mean()), sd, z, p)
     z = (value - float(s.mean())) / (sd * np.sqrt(1 + 1 / R))
     p = float(sst.t.sf(z, R - 1) if name in UPPER_TAIL else 2 * sst.t.sf(abs(z), R - 1))
     return Discrepancy(name, float(value), float(s.mean()), sd, float(z), p)

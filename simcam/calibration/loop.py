@@ -453,9 +453,11 @@ class Loop:
         """Fit ``effect`` on the fit frames from the proposing diagnostic ``via`` (default: the strongest):
         (candidate record for the report, fitted model or None)."""
         card = card_for(effect)
-        chosen = via or proposed_by[0]
+        chosen, form = via if isinstance(via, tuple) else (via or proposed_by[0], "")
         rec = {"effect": effect, "proposed_by": [d.name for d in proposed_by], "fitted_from": chosen.name}
-        ctx = FitContext(diagnostic=chosen.name, value=chosen.value, sim_mean=chosen.sim_mean,
+        if form:
+            rec["form"] = form
+        ctx = FitContext(diagnostic=chosen.name, value=chosen.value, sim_mean=chosen.sim_mean, form=form,
                          seed=self.cfg.seed * 1000 + tag, simulate=simulate_capture,
                          dark_specs=[sp for sp in self.g.specs(model, self.g.fit)
                                      if sp.kind == "dark" and not sp.series_only])
@@ -489,7 +491,7 @@ class Loop:
             run = HeldOut(self, cand, tuple(self.applicable), f"+ {rec['effect']}").extend(first)
             self._score(rec, run, held_cur)
             runs.append((rec, cand, run))
-        if first < R:
+        if first < R and runs:  # (no candidate could be fitted: nothing to race)
             lead = max(runs, key=lambda t: t[0]["heldout_gain"])[0]
             for rec, _cand, run in runs:
                 behind = lead["heldout_gain"] - rec["heldout_gain"]

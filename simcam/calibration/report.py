@@ -678,7 +678,8 @@ def _candidates_table(iterations: list[dict]) -> str:
             verdict = (f"no (left the race: {html.escape(c['left_race'])})" if c.get("left_race") else
                        "no" if c["kl_ok"] else "no (pixel KL grew)")
             several = len(c["proposed_by"]) > 1 and c.get("fitted_from")
-            name = c["effect"] + (f" (fitted from {c['fitted_from']})" if several else "")
+            name = c["effect"] + (f" ({c['form']})" if c.get("form") else "") + (
+                f" (fitted from {c['fitted_from']})" if several else "")
             rows.append(f"<tr><td>{i}</td><td class=l>{name}</td><td class=l>{', '.join(c['proposed_by'])}</td>"
                         f"<td>{_fmt(c['heldout_gain'])}</td><td>{_fmt(c['heldout_gain_sd'])}</td>"
                         f"<td>{c.get('replicates', '')}</td><td class=l>{html.escape(moved)}</td><td>{_fmt(c['kl_after'])}</td>"

@@ -9,7 +9,7 @@ import pytest
 from scipy import stats
 
 from simcam.calibration import diagnostics as dg
-from simcam.calibration.attribution import GAIN_Z, MIN_GAIN, Comparison, compare, t_logpdf
+from simcam.calibration.attribution import GAIN_Z, MIN_GAIN, Comparison, compare, predictive_logpdf, t_logpdf
 
 
 def test_t_logpdf_is_the_predictive_student_t():
@@ -86,3 +86,36 @@ def test_loop_scores_every_proposed_effect_and_takes_the_one_that_explains_most(
 
 def test_no_precedence_table_left():
     assert not hasattr(dg, "PRECEDENCE")
+
+
+def test_race_with_no_fitted_candidate_is_empty():
+    # every proposed effect's fit was skipped (e.g. amp_glow without two dark exposures): the race has
+    # nothing to score, and the iteration reports the proposing diagnostics as unexplained (it crashed with
+    # "max() arg is an empty sequence" on an independent simulator's amp-glow set)
+    from types import SimpleNamespace
+
+    from simcam.calibration.loop import Loop
+
+    fake = SimpleNamespace(cfg=SimpleNamespace(heldout_replicates=12))
+    assert Loop._race(fake, [], {}) == []
+
+
+def test_count_law_is_the_gamma_poisson_predictive():
+    # closed form: with S = 0 over R replicates the predictive is NB(r = 1/2, p = R / (R + 1)):
+    # P(N = 0) = p^r, P(N = 1) = r (1 - p) p^r
+    R = 16
+    law = dg.count_law("defect_pixels", np.zeros(R), 1 / 1000)
+    p = R / (R + 1)
+    assert law.pmf(0) == pytest.approx(p ** 0.5, rel=1e-12)
+    assert law.pmf(1) == pytest.approx(0.5 * (1 - p) * p ** 0.5, rel=1e-12)
+    # five defects where every replicate has none: a count far beyond the t law's floor
+    d = dg.discrepancy("defect_pixels", 5 / 1000, [0.0] * R, 1 / 1000)
+    assert d.p == pytest.approx(2 * law.sf(4), rel=1e-12) and d.p < 1e-6 and d.z > 5
+    assert dg.discrepancy("defect_pixels", 0.0, [0.0] * R, 1 / 1000).p == 1.0
+    # many pixels, or over-dispersed replicates: the t law (count_law gives None)
+    assert dg.count_law("defect_pixels", np.full(R, 10 / 1000), 1 / 1000) is None
+    assert dg.count_law("defect_pixels", np.array([0, 0, 0, 5] * 4) / 1000, 1 / 1000) is None
+    assert dg.count_law("lag1_corr", np.zeros(R), 1 / 1000) is None
+    # the held-out score uses the same law: log pmf over the one-pixel unit
+    assert predictive_logpdf("defect_pixels", 2 / 1000, np.zeros(R), 1 / 1000) == pytest.approx(
+        law.logpmf(2) + np.log(1000), rel=1e-12)

@@ -168,3 +168,28 @@ def test_charge_crosstalk_flat_variance_drop_and_dark_untouched():
     vd = (dd * dd).sum(0).mean() / 15  # read noise only: no electrons to share
     assert vd == pytest.approx(1e-8, rel=0.03)
     assert abs((dd[:, :, :-1] * dd[:, :, 1:]).mean() / (dd * dd).mean()) < 0.02
+
+
+@pytest.mark.parametrize("signal", [0.0, 0.5])
+def test_spatial_correlation_total_domain_couples_darks_and_flats_alike(signal):
+    # electrical crosstalk after the pixel: shot and read noise both get the cross kernel's adjacent
+    # correlation 2c(1 - 4c) / f (closed form), the variance and the mean are kept
+    c = 0.08
+    base = {"type": "poisson_gaussian", "beta1": 1e-3, "beta2": 2e-4}
+    m = comp([{"type": "spatial_correlation", "coefficient": c, "neighbours": "adjacent", "domain": "total"}],
+             base=base)
+    x = m.sample_frames(np.full((128, 128), signal, np.float32), cond(1.0), np.random.default_rng(5), 16)
+    d = x - x.mean(0)
+    v = (d * d).sum(0).mean() / 15
+    assert v == pytest.approx(1e-3 * signal + 2e-4, rel=0.03)
+    factor = (1 - 4 * c) ** 2 + 4 * c * c
+    r = (d[:, :, :-1] * d[:, :, 1:]).mean() / (d * d).mean()
+    assert r == pytest.approx(2 * c * (1 - 4 * c) / factor, abs=0.015)
+    assert abs(x.mean() - signal) < 1e-3
+
+
+def test_spatial_correlation_total_domain_needs_adjacent_and_a_small_coefficient():
+    with pytest.raises(NoiseModelError, match="domain 'total'"):
+        comp([{"type": "spatial_correlation", "coefficient": 0.1, "domain": "total"}])
+    with pytest.raises(NoiseModelError, match="domain 'total'"):
+        comp([{"type": "spatial_correlation", "coefficient": 0.3, "neighbours": "adjacent", "domain": "total"}])

@@ -192,6 +192,8 @@ class FitContext:
     seed: int = 0
     dark_specs: Sequence = ()
     simulate: Callable | None = None
+    #: the form to fit, for a card with several forms from one diagnostic (:meth:`EffectCard.variants`)
+    form: str = ""
 
 
 @dataclass(frozen=True)
@@ -309,7 +311,8 @@ class EffectCard:
     def variants(self, proposed_by: list) -> list:
         """The proposing diagnostics (``Discrepancy`` objects, strongest first) to fit a candidate from,
         one candidate each: an effect with several forms, each seen first by its own diagnostic, is
-        fitted in every form the proposals point to. Default: one candidate, from the strongest."""
+        fitted in every form the proposals point to; an item ``(diagnostic, form)`` asks for a named form
+        fitted from that diagnostic (``FitContext.form``). Default: one candidate, from the strongest."""
         return [proposed_by[0]]
 
     def marginal(self, p: EffectParams, v: np.ndarray, lin: np.ndarray, model) -> np.ndarray:

@@ -28,6 +28,16 @@ uncorrelated: the lag-1 / lag-2 statistics of
 ``simcam.calibration.diagnostics.lag1_corr`` / ``lag2_corr`` (diluted by the shot
 and quantisation noise in the data). Borders reflect about each plane's edge
 pixel. Reference: EMVA 1288 R4.0 sec. 8 (spatial non-white temporal noise).
+
+Domain ``total``. Electrical crosstalk *after* the pixel (between neighbouring column lines or in
+the analogue chain) couples everything the pixel puts out, photon shot noise included, not the read
+noise alone: with ``domain: total`` (``neighbours: adjacent``) all the temporal noise present at
+that point of the read-out (``x - signal``: shot, dark-signal and read noise, and the read-out
+effects listed before it) is filtered by the cross kernel ``(1 - 4c) delta + c (4 adjacent)`` of a
+charge-conserving coupling, scaled by ``1 / sqrt((1 - 4c)^2 + 4c^2)`` to keep its variance (the
+photon-transfer curve the base model was fitted to already contains the coupling). Adjacent pixels'
+noise then correlates ``2c(1 - 4c) / ((1 - 4c)^2 + 4c^2)`` in darks and flats alike, where
+``charge_crosstalk`` correlates the shot noise of flats only.
 """
 
 from __future__ import annotations
@@ -35,7 +45,7 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from .base import Effect, register_effect
 
@@ -77,10 +87,26 @@ class SpatialCorrelation(Effect):
     #: the mosaic (adjacent, different-colour neighbours correlate 2 c / (1 + 2 c^2), same-colour ones 2 px
     #: apart c^2 / (1 + 2 c^2)), as electrical crosstalk between neighbouring column or row lines gives
     neighbours: Literal["same_colour", "adjacent"] = "same_colour"
+    #: ``read``: the read noise is filtered; ``total``: all the noise at read-out (module docstring)
+    domain: Literal["read", "total"] = "read"
     needs_read = True
+
+    @model_validator(mode="after")
+    def _total_is_adjacent(self):
+        if self.domain == "total" and (self.neighbours != "adjacent" or not 0 <= self.coefficient < 0.25):
+            raise ValueError(f"domain 'total' couples adjacent pixels with 0 <= coefficient < 0.25; got neighbours "
+                             f"{self.neighbours!r}, coefficient {self.coefficient}")
+        return self
 
     def apply(self, x, ctx):
         if self.coefficient == 0:
+            return x
+        if self.domain == "total":
+            c = float(self.coefficient)
+            scale = np.float32(1.0 / np.sqrt((1 - 4 * c) ** 2 + 4 * c * c))
+            noise = charge_share(x - ctx.signal, c) * scale
+            x[...] = ctx.signal + noise
+            ctx.read[...] = charge_share(ctx.read, c) * scale
             return x
         f = plane_filter(ctx.read, float(self.coefficient), 2 if self.neighbours == "same_colour" else 1)
         x += f - ctx.read  # x = shot + read -> shot + filtered read
