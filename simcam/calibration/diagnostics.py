@@ -80,7 +80,7 @@ DIAGNOSTICS = (
     "col_temporal_excess", "dark_checker_jitter", "col_fpn_excess", "dsnu_excess", "hot_pixel_tail", "prnu_excess",
     "black_offset", "dark_signal_slope", "frame_mean_jitter", "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "lag1_corr",
     "lag2_corr", "defect_pixels", "glow_field",
-    "telegraph_pixels", "code_width_spread", "adjacent_corr", "flat_adjacent_corr",
+    "telegraph_pixels", "code_width_spread", "adjacent_corr", "flat_adjacent_corr", "frame_spectrum_peak",
 )
 
 #: The bootstrap null of the diagnostic on the left is not valid while one on the right is
@@ -123,6 +123,7 @@ NEEDS = {
     "defect_pixels": "needs a flat sequence (and darks or a declared black level)",
     "telegraph_pixels": "needs a dark sequence",
     "glow_field": "needs darks at >= 2 exposure times",
+    "frame_spectrum_peak": "needs a dark or flat sequence",
 }
 
 
@@ -469,6 +470,82 @@ def row_spectrum_peak(d):
 
 def col_spectrum_peak(d):
     return _peak(d, 1)
+
+
+#: side of the square blocks the 2-D spectrum is averaged over (the side of the tiles of an analysed mosaic,
+#: :mod:`simcam.calibration.region`, so a block never straddles a seam)
+SPECTRUM_BLOCK_PX = 128
+#: bins of the 2-D running median that divides out a broadband colour of the 2-D spectrum
+SPECTRUM2D_SMOOTH_BINS = 5
+
+
+def spectrum_blocks(d: CaptureData) -> tuple[list[np.ndarray], int] | None:
+    """The temporal residuals the 2-D spectrum reads (the darks', else the flats'), and the block side:
+    :data:`SPECTRUM_BLOCK_PX`, or the frame's shorter side rounded down to a multiple of 8 when smaller."""
+    res = d.temporal_residuals("dark") or d.temporal_residuals("flat")
+    if not res:
+        return None
+    h, w = res[0].shape[1:]
+    side = min(SPECTRUM_BLOCK_PX, h - h % 8, w - w % 8)
+    if side < 32:
+        raise NotApplicable(f"frames of {h} x {w} pixels: the 2-D spectrum needs blocks of at least 32 x 32")
+    return res, side
+
+
+def iter_blocks(res: list[np.ndarray], side: int):
+    """``side`` x ``side`` blocks of every residual stack on a grid from the top-left corner, each (n, side,
+    side) with every frame's block mean removed."""
+    for r in res:
+        h, w = r.shape[1:]
+        for y0 in range(0, h - side + 1, side):
+            for x0 in range(0, w - side + 1, side):
+                blk = r[:, y0:y0 + side, x0:x0 + side]
+                yield blk - blk.mean(axis=(1, 2), keepdims=True)
+
+
+def block_spectrum(d: CaptureData):
+    """Whitened 2-D periodogram of the temporal residuals (:func:`spectrum_blocks`): each block's
+    ``|FFT2|^2`` over its own median, averaged over blocks and frames, then divided by its running median
+    over :data:`SPECTRUM2D_SMOOTH_BINS` x :data:`SPECTRUM2D_SMOOTH_BINS` bins (a broadband colour such as
+    crosstalk divides out; narrow peaks stay). The axes (a frequency of 0 along the rows or along the
+    columns: row and column patterns, the 1-D spectra's business) are set to 1. Index ``[ky, kx]`` in
+    numpy's FFT order; ``side`` x ``side``."""
+    key = "bs2"
+    if key not in d.cache:
+        sb = spectrum_blocks(d)
+        if sb is None:
+            d.cache[key] = None
+            return None
+        res, side = sb
+        acc = np.zeros((side, side))
+        count = 0
+        for blk in iter_blocks(res, side):
+            p = np.abs(np.fft.fft2(blk)) ** 2
+            med = np.median(p.reshape(p.shape[0], -1), axis=1)
+            if np.any(med <= 0):
+                raise NotApplicable("a block of the residuals has a zero 2-D spectrum median (constant frames)")
+            acc += (p / med[:, None, None]).sum(0)
+            count += p.shape[0]
+        mean = acc / count
+        mean[0, :] = mean[:, 0] = np.median(mean[1:, 1:])
+        smooth = median_filter(mean, size=SPECTRUM2D_SMOOTH_BINS, mode="wrap")
+        if np.any(smooth <= 0):
+            raise NotApplicable("the smoothed 2-D spectrum has empty bins")
+        mean = mean / smooth
+        mean[0, :] = mean[:, 0] = 1.0
+        d.cache[key] = mean
+    return d.cache[key]
+
+
+def frame_spectrum_peak(d: CaptureData):
+    """The highest line of :func:`block_spectrum` off its axes over its median: a periodic pattern at an
+    angle to the rows and columns (oblique read-out interference, EMVA 1288 Release 4.0 sec. 8, the 2-D
+    spectrogram), which row and column means average away."""
+    p = block_spectrum(d)
+    if p is None:
+        return None
+    q = p[1:, 1:]
+    return _ratio(q.max(), np.median(q), "the median of the whitened 2-D spectrum")
 
 
 def column_profiles(d: CaptureData):

@@ -72,7 +72,7 @@ FAMILY_DIAGNOSTICS = {
     "row": ("row_mean_excess", "row_spectrum_peak"),
     "column": ("col_temporal_excess", "col_fpn_excess", "col_spectrum_peak"),
     "temporal": ("dsnu_excess", "prnu_excess", "hot_pixel_tail", "col_fpn_excess"),
-    "block": ("lag1_corr", "lag2_corr", "dark_checker_jitter"),
+    "block": ("lag1_corr", "lag2_corr", "dark_checker_jitter", "frame_spectrum_peak"),
     "frame": ("frame_mean_jitter", "dark_checker_jitter"),
 }
 

@@ -12,8 +12,18 @@ Fit. The peak of the whitened periodogram of the line means of the temporal resi
 axis), its frequency refined to 1/40 bin; A^2 from the per-frame sine / cosine projections minus
 their noise bias, frames weighted by the inverse square of their noise level.
 
-Profile. ``{type: periodic_pattern, amplitude, period_px, axis: rows | columns, random_phase: true}``,
-amplitude on normalised raw, ``amplitude_dn / (white - black)``.
+Oblique patterns. An interference whose frequency is not a multiple of the line rate advances its
+phase by a fraction of a period from one row to the next: the bands are tilted, and row or column
+means average them away. ``frame_spectrum_peak`` (the largest line off the axes of the whitened 2-D
+spectrum of the residuals, averaged over 128 x 128 blocks and frames) proposes the 2-D form: its
+peak gives the wave vector (refined to 1/8 bin in both directions by the blocks' summed projection
+power), A^2 the mean over blocks and frames of the squared complex projection minus its noise bias
+(each block has its own phase: tiles of a mosaic and frames alike). Both forms are candidates where
+both kinds of diagnostic propose the effect.
+
+Profile. ``{type: periodic_pattern, amplitude, period_px, axis: rows | columns, cross_frequency,
+random_phase: true}``, amplitude on normalised raw, ``amplitude_dn / (white - black)``;
+``cross_frequency`` (cycles per pixel along the other axis) is 0 for bands along an axis.
 """
 
 from __future__ import annotations
@@ -29,14 +39,26 @@ class PeriodicPattern(EffectParams):
     period_px: float = quantity("px", "period along the axis (pixels)")
     axis: str = quantity("", "'row': along the row index (horizontal bands), 'col': along the column index",
                          scale=None, default="row")
+    cross_frequency: float = quantity("1/px", "frequency along the other axis (cycles per pixel; 0: bands along "
+                                              "the axis)", default=0.0)
 
 
 class PeriodicPatternCard(EffectCard, name="periodic_pattern", params=PeriodicPattern, null_field="amplitude_dn",
-                          diagnostics=("row_spectrum_peak", "col_spectrum_peak"), marginal_rank=20):
+                          diagnostics=("row_spectrum_peak", "col_spectrum_peak", "frame_spectrum_peak"),
+                          marginal_rank=20):
+    def variants(self, proposed_by):
+        # the bands along an axis (the strongest 1-D spectrum) and the 2-D form, where both kinds propose it
+        one_d = [d for d in proposed_by if d.name != "frame_spectrum_peak"]
+        two_d = [d for d in proposed_by if d.name == "frame_spectrum_peak"]
+        return one_d[:1] + two_d[:1]
+
     def fit(self, d, model, ctx):
         """Sinusoid in the row (or column) means of the temporal residual: peak of the whitened
         periodogram, frequency refined to 1/40 bin, amplitude^2 from the per-frame sine/cosine
-        projections minus their noise bias, frames weighted by the inverse square of their noise level."""
+        projections minus their noise bias, frames weighted by the inverse square of their noise level.
+        From ``frame_spectrum_peak``: :func:`fit_oblique`."""
+        if ctx.diagnostic == "frame_spectrum_peak":
+            return fit_oblique(d)
         axis_name = "row" if ctx.diagnostic == "row_spectrum_peak" else "col"
         axis = 2 if axis_name == "row" else 1
         lm = np.concatenate(dg._line_means("all", axis, d))  # (frames, L)
@@ -72,8 +94,49 @@ class PeriodicPatternCard(EffectCard, name="periodic_pattern", params=PeriodicPa
     def to_profile(self, p, model):
         return ProfileTerm(effect={"type": "periodic_pattern", "amplitude": float(p.amplitude_dn / model.full_scale_dn),
                                    "period_px": float(p.period_px), "axis": "rows" if p.axis == "row" else "columns",
-                                   "random_phase": True})
+                                   "cross_frequency": float(p.cross_frequency), "random_phase": True})
 
     def from_profile(self, entry, full_scale_dn):
         return PeriodicPattern(amplitude_dn=float(entry["amplitude"]) * full_scale_dn, period_px=float(entry["period_px"]),
-                               axis="row" if entry.get("axis", "rows") == "rows" else "col")
+                               axis="row" if entry.get("axis", "rows") == "rows" else "col",
+                               cross_frequency=float(entry.get("cross_frequency", 0.0)))
+
+
+def fit_oblique(d) -> PeriodicPattern:
+    """The 2-D form from :func:`simcam.calibration.diagnostics.block_spectrum` (module docstring)."""
+    p = dg.block_spectrum(d)
+    res, side = dg.spectrum_blocks(d)
+    q = np.array(p, dtype=np.float64)
+    q[0, :] = q[:, 0] = 0.0
+    iy, ix = np.unravel_index(int(np.argmax(q)), q.shape)
+    fy0 = (iy if iy <= side // 2 else iy - side) / side
+    fx0 = (ix if ix <= side // 2 else ix - side) / side
+    blocks = list(dg.iter_blocks(res, side))
+    yy, xx = np.mgrid[0:side, 0:side].astype(np.float64)
+    step = 1.0 / (8 * side)
+
+    def projections(fy, fx):
+        e = np.exp(-2j * np.pi * (fy * yy + fx * xx))
+        return [np.tensordot(b, e, axes=([1, 2], [0, 1])) for b in blocks]  # per block: (n,) complex
+
+    best = (-1.0, fy0, fx0)
+    for fy in fy0 + step * np.arange(-4, 5):
+        for fx in fx0 + step * np.arange(-4, 5):
+            pw = float(sum(np.sum(np.abs(c) ** 2) for c in projections(fy, fx)))
+            if pw > best[0]:
+                best = (pw, fy, fx)
+    _, fy, fx = best
+    npx = side * side
+    a2, w = 0.0, 0.0
+    for b, c in zip(blocks, projections(fy, fx)):
+        amp2 = (2.0 / npx) ** 2 * np.abs(c) ** 2  # |2/N sum b e^{-i phi}|^2 = A^2 for b = A sin(phi + phase)
+        bias = 4.0 * np.var(b, axis=(1, 2)) / npx  # its expectation on white noise of that variance
+        a2 += float(np.sum(amp2 - bias))
+        w += b.shape[0]
+    A = float(np.sqrt(max(a2 / w, 0.0)))
+    if fy < 0 or (fy == 0 and fx < 0):
+        fy, fx = -fy, -fx
+    if abs(fy) >= abs(fx):
+        return PeriodicPattern(amplitude_dn=A, period_px=float(1.0 / fy), axis="row", cross_frequency=float(fx))
+    s = 1.0 if fx > 0 else -1.0
+    return PeriodicPattern(amplitude_dn=A, period_px=float(1.0 / abs(fx)), axis="col", cross_frequency=float(fy * s))

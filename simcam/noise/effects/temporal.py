@@ -70,10 +70,15 @@ class HeavyTailRead(Effect):
 
 @register_effect
 class PeriodicPattern(Effect):
-    """Sinusoidal banding ``amplitude * sin(2 pi i / period_px + phase)`` added (normalised raw).
+    """Sinusoidal banding ``amplitude * sin(2 pi (i / period_px + j * cross_frequency) + phase)`` added
+    (normalised raw).
 
-    ``axis: rows`` varies with the row index (horizontal bands), ``columns``
-    with the column index. ``random_phase`` draws the phase per frame
+    ``axis: rows`` takes ``i`` the row index and ``j`` the column index (horizontal bands, tilted
+    when ``cross_frequency`` is not 0), ``columns`` the other way round. ``cross_frequency``
+    (cycles per pixel along the other axis) tilts the bands: an interference whose frequency is
+    not a multiple of the line rate advances its phase from one row to the next by a fraction of a
+    period, so read-out-order interference shows as oblique stripes (EMVA 1288 Release 4.0, sec.
+    8: a peak off the axes of the 2-D spectrogram). ``random_phase`` draws the phase per frame
     (uniform), otherwise ``phase`` (radians) is fixed.
     """
 
@@ -81,6 +86,7 @@ class PeriodicPattern(Effect):
     amplitude: float = Field(ge=0)
     period_px: float = Field(gt=0)
     axis: Literal["rows", "columns"] = "rows"
+    cross_frequency: float = Field(0.0, ge=-0.5, le=0.5)
     random_phase: bool = True
     phase: float = 0.0
 
@@ -92,9 +98,16 @@ class PeriodicPattern(Effect):
 
     def apply(self, x, ctx):
         phase = ctx.frame.get("phase", self.phase) if ctx.frame else self.phase
-        n = x.shape[0] if self.axis == "rows" else x.shape[1]
-        wave = (self.amplitude * np.sin(2 * np.pi * np.arange(n) / self.period_px + phase)).astype(np.float32)
-        x += wave[:, None] if self.axis == "rows" else wave[None, :]
+        h, w = x.shape[-2:]
+        n = h if self.axis == "rows" else w
+        along = 2 * np.pi * np.arange(n) / self.period_px
+        if self.cross_frequency == 0:
+            wave = (self.amplitude * np.sin(along + phase)).astype(np.float32)
+            x += wave[:, None] if self.axis == "rows" else wave[None, :]
+            return x
+        cross = 2 * np.pi * self.cross_frequency * np.arange(w if self.axis == "rows" else h)
+        grid = along[:, None] + cross[None, :] if self.axis == "rows" else cross[:, None] + along[None, :]
+        x += (self.amplitude * np.sin(grid + phase)).astype(np.float32)
         return x
 
 
