@@ -109,6 +109,7 @@ def composite(group: Group, clean: torch.Tensor, ctx: Ctx) -> torch.Tensor:
     for i, e in enumerate(effects):
         if e.stage == "readout":
             states[i].read = read
+            states[i].signal = signal
             x = EFFECTS[e.type](egroups[i], x, ctx, states[i])
             read = states[i].read
     return x

@@ -37,6 +37,7 @@ class EffectState:
     offsets: np.ndarray | None = None  # per-sample crop offsets [G, 2] in the full frame, or None
     per_uniq: Any = None  # name -> list of the distinct models' fixed tensors (not spatial: ADC edges)
     exposure_s: torch.Tensor | None = None  # [G, 1, 1, 1] float64 seconds, or None
+    signal: torch.Tensor | None = None  # expected signal after the signal-stage effects (read-out effects)
 
 
 def _exposure(st: EffectState, name: str) -> torch.Tensor:
@@ -163,6 +164,12 @@ def spatial_correlation(group: Group, x, ctx: Ctx, st: EffectState):
     if not np.any(cs):
         return x
     c = ctx.scalar(group, lambda e: e.coefficient)
+    if group.models[0].domain == "total":  # all the noise at read-out, cross kernel, variance kept
+        scale = 1.0 / torch.sqrt((1 - 4 * c) ** 2 + 4 * c * c)
+        zero = torch.zeros((), dtype=x.dtype, device=x.device)
+        noise = charge_share(x - st.signal, c, zero) * scale
+        st.read = charge_share(st.read, c, zero) * scale
+        return st.signal + noise
     f = plane_filter(st.read, c, 2 if group.models[0].neighbours == "same_colour" else 1)
     x = x + (f - st.read)
     st.read = f
@@ -183,6 +190,17 @@ def periodic_pattern(group: Group, x, ctx: Ctx, st: EffectState):
     i = torch.arange(n, device=x.device, dtype=torch.float64)[None, :]
     if st.offsets is not None:  # position in the full frame
         i = i + torch.as_tensor(st.offsets[:, ax], dtype=torch.float64, device=x.device)[:, None]
+    cross = group.values(lambda e: e.cross_frequency)
+    if np.any(cross):  # tilted bands: the phase also advances along the other axis
+        fc = ctx.scalar(group, lambda e: e.cross_frequency, dtype=torch.float64).reshape(-1, 1)
+        m = x.shape[-1 - ax]
+        j = torch.arange(m, device=x.device, dtype=torch.float64)[None, :]
+        if st.offsets is not None:
+            j = j + torch.as_tensor(st.offsets[:, 1 - ax], dtype=torch.float64, device=x.device)[:, None]
+        along = (2 * math.pi * i / period + phase)[:, :, None]  # [G, n, 1]
+        grid = along + (2 * math.pi * fc * j)[:, None, :]  # [G, n, m]: n along the axis, m across
+        wave = (amp[:, :, None] * torch.sin(grid)).to(x.dtype)
+        return x + (wave[:, None] if e0.axis == "rows" else wave.transpose(1, 2)[:, None])
     wave = (amp * torch.sin(2 * math.pi * i / period + phase)).to(x.dtype)  # [G, n]
     return x + (wave[:, None, :, None] if e0.axis == "rows" else wave[:, None, None, :])
 

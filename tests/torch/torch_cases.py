@@ -37,6 +37,14 @@ EFFECT_CASES = {
     # the same kernel on the mosaic: adjacent, different-colour neighbours correlate (what simcam loop fits
     # from adjacent_corr)
     "spatial_correlation_adjacent": [{"type": "spatial_correlation", "coefficient": 0.2, "neighbours": "adjacent"}],
+    # electrical crosstalk after the pixel: all the noise at read-out, cross kernel, variance kept
+    "spatial_correlation_total": [{"type": "spatial_correlation", "coefficient": 0.12, "neighbours": "adjacent",
+                                   "domain": "total"}],
+    # oblique bands (read-out interference off the line rate)
+    "periodic_pattern_oblique": [{"type": "periodic_pattern", "amplitude": 0.004, "period_px": 6.0, "axis": "rows",
+                                  "cross_frequency": 0.07},
+                                 {"type": "periodic_pattern", "amplitude": 0.003, "period_px": 9.0, "axis": "columns",
+                                  "cross_frequency": -0.04}],
     "periodic_pattern": [{"type": "periodic_pattern", "amplitude": 0.004, "period_px": 7.0, "axis": "columns"},
                          {"type": "periodic_pattern", "amplitude": 0.003, "period_px": 5.0, "axis": "rows",
                           "random_phase": False, "phase": 0.7}],
