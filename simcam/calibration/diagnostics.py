@@ -98,7 +98,7 @@ class NotApplicable(Exception):
 
 #: Reason reported when a statistic returns None: what it needs and the capture set lacks.
 NEEDS = {
-    "ptc_curvature": "needs >= 3 flat sequences",
+    "ptc_curvature": "needs >= 3 flat sequences, or darks and >= 2 flats",
     "plane_gain_spread": "needs a CFA sensor and flats (with darks, or >= 2 flats)",
     "row_mean_excess": "needs a dark or flat sequence",
     "col_temporal_excess": "needs a dark or flat sequence",
@@ -322,8 +322,13 @@ def _clip_robust(m: np.ndarray, k: float = 5.0) -> np.ndarray:
 # ------------------------------------------------------------------ statistics
 
 def ptc_curvature(d: CaptureData):
+    """Curvature of the photon-transfer curve (temporal variance against mean above the dark level) per CFA
+    plane, relative to its slope: the quadratic coefficient times the highest level over the linear one,
+    averaged over the planes. The darks are a point of the curve (mean 0, the read variance), so darks and
+    two flat levels already give the three points a curvature needs (an EMVA 1288-style set with two
+    illuminations)."""
     darks, flats = d.ptc_points()
-    if len(flats) < 3:
+    if len(flats) + (1 if darks else 0) < 3:
         return None
     pts = np.array(darks + flats)  # (m, 4, 2)
     mu0 = np.mean([p[:, 0] for p in darks], axis=0) if darks else np.zeros(4)
