@@ -512,9 +512,10 @@ def block_spectrum(d: CaptureData):
     """Whitened 2-D periodogram of the temporal residuals (:func:`spectrum_blocks`): each block's
     ``|FFT2|^2`` over its own median, averaged over blocks and frames, then divided by its running median
     over :data:`SPECTRUM2D_SMOOTH_BINS` x :data:`SPECTRUM2D_SMOOTH_BINS` bins (a broadband colour such as
-    crosstalk divides out; narrow peaks stay). The axes (a frequency of 0 along the rows or along the
-    columns: row and column patterns, the 1-D spectra's business) are set to 1. Index ``[ky, kx]`` in
-    numpy's FFT order; ``side`` x ``side``."""
+    crosstalk divides out; narrow peaks stay). The axes and the Nyquist lines (a frequency of 0 or 1/2
+    along the rows or along the columns: row and column patterns, also those that differ between the
+    even and odd pixels of a CFA, the 1-D spectra's business) are set to 1 (:func:`axis_lines`). Index
+    ``[ky, kx]`` in numpy's FFT order; ``side`` x ``side``."""
     key = "bs2"
     if key not in d.cache:
         sb = spectrum_blocks(d)
@@ -532,14 +533,23 @@ def block_spectrum(d: CaptureData):
             acc += (p / med[:, None, None]).sum(0)
             count += p.shape[0]
         mean = acc / count
-        mean[0, :] = mean[:, 0] = np.median(mean[1:, 1:])
+        lines = axis_lines(side)
+        mean[lines] = np.median(mean[~lines])
         smooth = median_filter(mean, size=SPECTRUM2D_SMOOTH_BINS, mode="wrap")
         if np.any(smooth <= 0):
             raise NotApplicable("the smoothed 2-D spectrum has empty bins")
         mean = mean / smooth
-        mean[0, :] = mean[:, 0] = 1.0
+        mean[lines] = 1.0
         d.cache[key] = mean
     return d.cache[key]
+
+
+def axis_lines(side: int) -> np.ndarray:
+    """Mask of the 2-D spectrum's rows and columns at frequency 0 and 1/2 (numpy FFT order)."""
+    m = np.zeros((side, side), bool)
+    for k in (0, side // 2):
+        m[k, :] = m[:, k] = True
+    return m
 
 
 def frame_spectrum_peak(d: CaptureData):
@@ -549,7 +559,7 @@ def frame_spectrum_peak(d: CaptureData):
     p = block_spectrum(d)
     if p is None:
         return None
-    q = p[1:, 1:]
+    q = p[~axis_lines(p.shape[0])]
     return _ratio(q.max(), np.median(q), "the median of the whitened 2-D spectrum")
 
 

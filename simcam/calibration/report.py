@@ -433,7 +433,8 @@ def _dark_table(dc: dict | None) -> str:
 def _drop(before, after) -> str:
     if not before or before <= 0 or after is None:
         return ""
-    return f" ({100 * (1 - after / before):.0f} % drop)"
+    change = 100 * (1 - after / before)
+    return f" ({change:.0f} % drop)" if change >= 0 else f" (grew {-change:.0f} %)"
 
 
 def _family_table(h: dict) -> str:

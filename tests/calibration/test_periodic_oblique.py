@@ -64,3 +64,17 @@ def test_small_frames_are_not_applicable():
     with pytest.raises(dg.NotApplicable, match="32 x 32"):
         dg.frame_spectrum_peak(d)
     assert dg.statistic("frame_spectrum_peak", d)[0] is None
+
+
+def test_row_noise_that_differs_between_cfa_columns_is_not_a_2d_peak():
+    # per-frame row offsets, different on even and odd columns (a CFA's two colours of a row): energy on the
+    # kx = 0 and kx = 1/2 lines only, which the 2-D spectrum leaves to the 1-D diagnostics
+    rng = np.random.default_rng(4)
+    d = _darks(seed=4)
+    f = d.darks[0].astype(np.float64)
+    off = rng.standard_normal((f.shape[0], f.shape[1], 2)) * np.array([1.5, 0.5])
+    f[:, :, 0::2] += off[:, :, :1]
+    f[:, :, 1::2] += off[:, :, 1:]
+    rows = dg.CaptureData([f.astype(np.float32)], [], [], None, 4095.0, "RGGB")
+    assert dg.row_mean_excess(rows) > 5
+    assert dg.frame_spectrum_peak(rows) < 2.5

@@ -107,7 +107,7 @@ def fit_oblique(d) -> PeriodicPattern:
     p = dg.block_spectrum(d)
     res, side = dg.spectrum_blocks(d)
     q = np.array(p, dtype=np.float64)
-    q[0, :] = q[:, 0] = 0.0
+    q[dg.axis_lines(side)] = 0.0
     iy, ix = np.unravel_index(int(np.argmax(q)), q.shape)
     fy0 = (iy if iy <= side // 2 else iy - side) / side
     fx0 = (ix if ix <= side // 2 else ix - side) / side
