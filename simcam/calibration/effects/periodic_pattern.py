@@ -39,8 +39,8 @@ class PeriodicPattern(EffectParams):
     period_px: float = quantity("px", "period along the axis (pixels)")
     axis: str = quantity("", "'row': along the row index (horizontal bands), 'col': along the column index",
                          scale=None, default="row")
-    cross_frequency: float = quantity("1/px", "frequency along the other axis (cycles per pixel; 0: bands along "
-                                              "the axis)", default=0.0)
+    cross_frequency: float | None = quantity("1/px", "frequency along the other axis (cycles per pixel; None: "
+                                                     "bands along the axis)", default=None)
 
 
 class PeriodicPatternCard(EffectCard, name="periodic_pattern", params=PeriodicPattern, null_field="amplitude_dn",
@@ -94,12 +94,12 @@ class PeriodicPatternCard(EffectCard, name="periodic_pattern", params=PeriodicPa
     def to_profile(self, p, model):
         return ProfileTerm(effect={"type": "periodic_pattern", "amplitude": float(p.amplitude_dn / model.full_scale_dn),
                                    "period_px": float(p.period_px), "axis": "rows" if p.axis == "row" else "columns",
-                                   "cross_frequency": float(p.cross_frequency), "random_phase": True})
+                                   "cross_frequency": float(p.cross_frequency or 0.0), "random_phase": True})
 
     def from_profile(self, entry, full_scale_dn):
         return PeriodicPattern(amplitude_dn=float(entry["amplitude"]) * full_scale_dn, period_px=float(entry["period_px"]),
                                axis="row" if entry.get("axis", "rows") == "rows" else "col",
-                               cross_frequency=float(entry.get("cross_frequency", 0.0)))
+                               cross_frequency=float(entry["cross_frequency"]) if entry.get("cross_frequency") else None)
 
 
 def fit_oblique(d) -> PeriodicPattern:
