@@ -191,12 +191,20 @@ def write_image(path: str | Path, data, *, depth: str | int | None = None,
     samples = to_samples(data, dtype)
     if samples.ndim == 2:
         samples = samples[:, :, None]
-    h, w, c = samples.shape
+    c = samples.shape[2]
     if ext_is_tiff(path) and c in (1, 3) and not attributes and comp.partition(":")[0] in TIFF_COMPRESSIONS:
         _write_tiff(path, samples, comp, kind if c == 3 else None, meta)
-        if thumbnail is not None:
-            write_thumbnail(thumbnail, samples, kind=kind, meta=meta, size=thumbnail_size, protect=protect)
-        return path
+    else:
+        _write_oiio(path, samples, dtype, comp, quality, kind if c == 3 else None, meta, attributes)
+    if thumbnail is not None:
+        write_thumbnail(thumbnail, samples, kind=kind, meta=meta, size=thumbnail_size, protect=protect)
+    return path
+
+
+def _write_oiio(path: Path, samples: np.ndarray, dtype: str, comp: str | None, quality: int, kind: str | None,
+                meta, attributes: dict | None) -> None:
+    """Any format through OpenImageIO (everything :func:`_write_tiff` does not take)."""
+    h, w, c = samples.shape
     import OpenImageIO as oiio
 
     type_desc = {"uint8": oiio.UINT8, "uint16": oiio.UINT16, "float32": oiio.FLOAT, "half": oiio.HALF}[dtype]
@@ -213,7 +221,7 @@ def write_image(path: str | Path, data, *, depth: str | int | None = None,
         spec.attribute("png:filter", _PNG_FILTER_SUB)
     if ext in (".jpg", ".jpeg"):
         spec.attribute("Compression", f"jpeg:{int(quality)}")
-    _colour_tags(spec, ext, kind if c == 3 else None)
+    _colour_tags(spec, ext, kind)
     spec.attribute("Software", "simcam")
     for k, v in exif_attributes(meta).items():
         spec.attribute(k, v)
@@ -227,9 +235,6 @@ def write_image(path: str | Path, data, *, depth: str | int | None = None,
         out.close()
         if not ok:
             raise ImageIOError(f"{path}: write failed ({out.geterror()})")
-    if thumbnail is not None:
-        write_thumbnail(thumbnail, samples, kind=kind, meta=meta, size=thumbnail_size, protect=protect)
-    return path
 
 
 def ext_is_tiff(path: Path) -> bool:
