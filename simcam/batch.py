@@ -221,7 +221,7 @@ def _client(config: BatchConfig, preload: Sequence[str] = ()):
     cluster = LocalCluster(n_workers=int(workers), threads_per_worker=int(config.threads_per_worker),
                            processes=True, memory_limit=config.memory_limit, dashboard_address=dashboard,
                            silence_logs=logging.ERROR, env=_worker_env(config.threads_per_worker),
-                           host="127.0.0.1")
+                           host="127.0.0.1", preload=["simcam.batch_worker"])
     return Client(cluster), cluster
 
 
@@ -290,9 +290,17 @@ def run_batch(job: Callable[[Any], dict], tasks: Sequence[Task], config: BatchCo
                         outcomes[i] = Outcome(tasks[i].key, ok=False, error=f"worker failed: {one_line(exc)}")
                     bar.update(1)
             finally:
-                client.close()
-                if cluster is not None:
-                    cluster.close()
+                # the results are in: what distributed logs while it shuts down (a heartbeat that
+                # meets a closed scheduler) is not the user's business
+                from simcam.batch_worker import quiet_logging, restore_logging
+
+                former = quiet_logging()
+                try:
+                    client.close()
+                    if cluster is not None:
+                        cluster.close()
+                finally:
+                    restore_logging(former)
     finally:
         bar.close()
     return [outcomes[i] for i in range(len(tasks))]

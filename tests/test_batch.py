@@ -153,7 +153,10 @@ def test_bench_images_x_denoisers_on_two_workers_equals_the_serial_scores(tmp_pa
 def test_local_cluster_workers_run_with_one_thread_and_glibc_malloc_defaults():
     """Workers cap simcam's own row bands (SIMCAM_THREADS) like numba/BLAS/OpenMP, and do not inherit
     dask's MALLOC_TRIM_THRESHOLD_ (it turns off glibc's dynamic mmap threshold: every image band
-    becomes a fresh mmap, ~7x the page faults per render)."""
+    becomes a fresh mmap, ~7x the page faults per render). Their ``distributed`` loggers are at
+    CRITICAL (a heartbeat meeting a closed scheduler at shutdown logged a traceback); the client's
+    loggers get their levels back after the batch."""
+    import logging
     import os
 
     from simcam.batch import THREAD_VARIABLES, BatchConfig, Task, run_batch
@@ -163,13 +166,17 @@ def test_local_cluster_workers_run_with_one_thread_and_glibc_malloc_defaults():
         import numba  # imported by the fork server: it read NUMBA_NUM_THREADS there
 
         return {"env": {n: os.environ.get(n) for n in names}, "threads": threads(),
-                "numba": numba.config.NUMBA_NUM_THREADS}
+                "numba": numba.config.NUMBA_NUM_THREADS,
+                "log": logging.getLogger("distributed.worker").getEffectiveLevel()}
 
     environment.preload = ("numba", "numpy")
 
     names = [*THREAD_VARIABLES, "MALLOC_TRIM_THRESHOLD_"]
+    client_level = logging.getLogger("distributed.comm").level
     out = run_batch(environment, [Task("a", names)], BatchConfig(workers=1, progress=False), echo=lambda s: None)
     assert out[0].ok, out[0].error
+    assert out[0].info["log"] == logging.CRITICAL
+    assert logging.getLogger("distributed.comm").level == client_level
     env = out[0].info["env"]
     assert {n: env[n] for n in THREAD_VARIABLES} == {n: "1" for n in THREAD_VARIABLES}
     assert out[0].info["threads"] == 1 and out[0].info["numba"] == 1
