@@ -22,7 +22,8 @@ LAYERS: list[tuple[str, ...]] = [
     ("io", "colour", "demosaic", "noise"),
     ("stages", "profiles"),
     ("pipeline", "render_samples"),
-    ("synth", "groundtruth", "denoise", "training", "calibration", "torch", "trainingset", "batch"),
+    ("synth", "groundtruth", "denoise", "training", "calibration", "torch", "trainingset", "batch",
+     "batch_worker"),
     ("jobs", "api"),  # the per-item work of the commands; the one-call Python entry points
     ("commands", "cli", "__main__", "__init__"),  # simcam/__init__ re-exports errors, frame and api
 ]
