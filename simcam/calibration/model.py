@@ -198,3 +198,25 @@ def marginal_variance(model: LoopModel, signal_dn: np.ndarray, *, fixed_in_clean
     for c, p in sorted(terms, key=lambda cp: cp[0].marginal_rank):
         v = c.marginal(p, v, lin, model)
     return v + model.q ** 2 / 12.0
+
+
+def shot_factors(model: LoopModel, y: np.ndarray) -> np.ndarray:
+    """Per flat point and site, the factor the current model's other effects put on the shot-noise
+    term ``K g x`` of the temporal variance (``charge_crosstalk``: ``(1 - 4c)^2 + 4c^2``; 1 for most):
+    the model's temporal variance at ``y`` less its dark variance, over ``K g x``. Without it a model
+    whose PTC slope is not ``K g`` would have its K refitted as if it were (the crosstalk counted
+    twice). 1 where the model has no Gaussian marginal (:func:`marginal_variance`)."""
+    y = np.atleast_2d(np.asarray(y, dtype=np.float64))
+    out = np.ones_like(y)
+    v0 = marginal_variance(model, np.zeros((2, 2)), fixed_in_clean=True)
+    if v0 is None:
+        return out
+    kg = model.K * site_map(model.gains(), (2, 2))
+    for i, row in enumerate(y):
+        sig = site_map(np.maximum(row, 0.0), (2, 2))
+        lin = linear_signal(model, sig)
+        vy = marginal_variance(model, sig, fixed_in_clean=True)
+        shot = kg * lin
+        f = np.where(shot > 0, (vy - v0) / np.where(shot > 0, shot, 1.0), 1.0)
+        out[i] = [f[dy, dx] for dy, dx in PLANE_OFFSETS]
+    return np.clip(out, 0.05, 20.0)

@@ -8,8 +8,9 @@ York University, 2020, eq. 3.6, the Poisson-Gaussian noise level function beta1 
 beta1 per channel). It enters the closed-form marginal through the shot-noise term ``K g_c x`` of
 the base.
 
-Fit. Per-plane photon-transfer slopes k_c (``plane_gain_spread``): ``g = k / mean(k)``, and the
-system gain K is re-estimated as ``mean(k)``.
+Fit. Per-plane photon-transfer slopes k_c (``plane_gain_spread``), each divided by the factor the
+model's other effects put on the shot term (:func:`simcam.calibration.model.shot_factors`; charge
+sharing lowers it): ``g = k / mean(k)``, and the system gain K is re-estimated as ``mean(k)``.
 
 Profile. A gain after photon counting changes the variance-to-mean ratio, so it is written as the
 base's per-site ``beta1 = K g_c / (white - black)``, not as the noise stage's ``channel_gain``
@@ -35,7 +36,13 @@ class ChannelGainCard(DeclaredProfileCard, name="channel_gain", params=ChannelGa
                       null_field="gains", null_value=1.0):
 
     def fit(self, d, model, ctx):
+        from ..model import shot_factors
+
         k = dg.plane_slopes(d)
+        darks, flats = d.ptc_points()
+        mu0 = np.mean([p[:, 0] for p in darks], axis=0) if darks else model.black_dn.ravel()
+        # the slope each site would have without the model's other effects on the shot term
+        k = k / shot_factors(model, np.array([f[:, 0] for f in flats]) - mu0).mean(axis=0)
         g = k / k.mean()
         return Fit(ChannelGain(gains=[float(x) for x in g]), K=float(k.mean()))
 

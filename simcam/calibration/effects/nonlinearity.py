@@ -11,7 +11,9 @@ offsets (DSNU, column FPN) and the quantisation come after the response in the s
 
 Fit. Least squares of the photon-transfer points (``ptc_curvature``):
 ``var(y) = (1 + 2 c x / s)^2 (K g x + r)`` with ``y = x + c x^2 / s`` (s = white - black, r the dark
-variance), relative residuals, K re-estimated with c (c within +-0.45).
+variance), relative residuals, K re-estimated with c (c within +-0.45). The shot term carries the
+factor the model's other effects put on it (:func:`simcam.calibration.model.shot_factors`: charge sharing lowers a flat's
+shot variance), so K stays the system gain.
 
 Profile. ``{type: nonlinearity, strength}`` with ``strength = -c`` (the noise stage's
 ``y = x - strength x^2`` on normalised raw), clipped to the stage's +-0.45.
@@ -41,7 +43,9 @@ class NonlinearityCard(EffectCard, name="nonlinearity", params=Nonlinearity, nul
         v = np.array([f[:, 1] for f in flats])
         r = model.var_dark_dn2
         s = model.full_scale_dn
-        g = model.gains()
+        from ..model import shot_factors
+
+        g = model.gains() * shot_factors(model, y)
 
         def resid(p):
             K, c = p
