@@ -37,7 +37,13 @@ black_offset            black_level_offset  median of dark mean map - declared b
 dark_signal_slope       dark_current        least-squares slope of the dark level (1 %-trimmed mean of
                                             each sequence's temporal-mean image: hot pixels left out)
                                             against exposure time, darks at every exposure time (DN/s)
-frame_mean_jitter       frame_flicker       var of flat frame means / signal^2
+dark_variance_slope     dark_current        least-squares slope of the dark temporal variance (1 %-trimmed
+                                            mean over pixels, frame means removed) against exposure time
+                                            (DN^2/s; EMVA 1288's variance method)
+frame_mean_jitter       frame_flicker       frame-to-frame var of flat frame means (half the mean square
+                                            successive difference) / signal^2
+frame_mean_drift        (none)              log(var of frame means / half their mean square successive
+                                            difference), darks and flats (a level drifting over frames)
 dark_tail_mass          heavy_tail_read     fraction of dark residuals beyond 4 IQR-sigma
 dark_ppcc_lambda        heavy_tail_read     Tukey-lambda shape maximising the PPCC of dark residuals
 code_occupancy          quantization        used / possible integer codes in the central 98 % of darks
@@ -80,7 +86,8 @@ PLANE_OFFSETS = ((0, 0), (0, 1), (1, 0), (1, 1))
 DIAGNOSTICS = (
     "ptc_curvature", "plane_gain_spread", "row_mean_excess", "row_spectrum_peak", "col_spectrum_peak",
     "col_temporal_excess", "dark_checker_jitter", "col_fpn_excess", "dsnu_excess", "hot_pixel_tail", "prnu_excess",
-    "black_offset", "dark_signal_slope", "frame_mean_jitter", "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "lag1_corr",
+    "black_offset", "dark_signal_slope", "dark_variance_slope", "frame_mean_jitter", "frame_mean_drift",
+    "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "lag1_corr",
     "lag2_corr", "defect_pixels", "glow_field",
     "telegraph_pixels", "code_width_spread", "adjacent_corr", "flat_adjacent_corr", "frame_spectrum_peak",
 )
@@ -114,6 +121,8 @@ NEEDS = {
     "black_offset": "needs a dark sequence and a declared black level",
     "dark_signal_slope": "needs darks at >= 2 exposure times",
     "frame_mean_jitter": "needs a flat sequence",
+    "frame_mean_drift": "needs a dark or flat sequence of >= 4 frames",
+    "dark_variance_slope": "needs darks of >= 2 frames at >= 2 exposure times",
     "dark_tail_mass": "needs a dark sequence",
     "dark_ppcc_lambda": "needs a dark sequence",
     "code_occupancy": "needs a dark or flat sequence",
@@ -807,6 +816,11 @@ def black_offset(d: CaptureData):
 
 
 def frame_mean_jitter(d: CaptureData):
+    """Frame-to-frame variance of the flat frame means over the squared signal above dark, the variance
+    taken as half the mean square successive difference (J. von Neumann, "Distribution of the ratio of
+    the mean square successive difference to the variance", Ann. Math. Statist. 12, 1941): the same as
+    the sample variance for frame means independent from frame to frame (flicker), blind to a level that
+    drifts slowly over the sequence (:func:`frame_mean_drift` sees that)."""
     if not d.flats:
         return None
     ref = float(np.mean([x.mean() for x in d.darks])) if d.darks else (
@@ -814,7 +828,32 @@ def frame_mean_jitter(d: CaptureData):
     vals = []
     for f in d.flats:
         means = f.astype(np.float64).mean(axis=(1, 2))
-        vals.append(_ratio(np.var(means, ddof=1), (means.mean() - ref) ** 2, "the flat's squared signal above dark"))
+        if means.size < 2:
+            continue
+        vals.append(_ratio(0.5 * np.mean(np.diff(means) ** 2), (means.mean() - ref) ** 2,
+                           "the flat's squared signal above dark"))
+    if not vals:
+        raise NotApplicable("no flat sequence of >= 2 frames")
+    return float(np.mean(vals))
+
+
+def frame_mean_drift(d: CaptureData):
+    """Log of the ratio of the sample variance of a sequence's frame means to half their mean square
+    successive difference (the inverse of von Neumann's ratio, 1941), averaged over the dark and flat
+    sequences of >= 4 frames: about 0 when the frame means are independent from frame to frame, positive
+    when the level drifts over the sequence (a black level or a gain that warms up), negative when it
+    alternates. No effect of the vocabulary drifts: the bootstrap null is that of independent frames."""
+    vals = []
+    for f in [*d.darks, *d.flats]:
+        if f.shape[0] < 4:
+            continue
+        m = f.astype(np.float64).mean(axis=(1, 2))
+        msd = 0.5 * float(np.mean(np.diff(m) ** 2))
+        v = float(np.var(m, ddof=1))
+        if msd > 0 and v > 0:
+            vals.append(np.log(v / msd))
+    if not vals:
+        raise NotApplicable("no dark or flat sequence of >= 4 frames whose frame means vary")
     return float(np.mean(vals))
 
 
@@ -1048,6 +1087,26 @@ def dark_signal_slope(d: CaptureData):
     m = np.array([float(sst.trim_mean(f.astype(np.float64).mean(0).ravel(), 0.01)) for _, f in d.dark_series])
     w = np.array([f.shape[0] for _, f in d.dark_series], dtype=np.float64)
     return float(np.polyfit(t, m, 1, w=np.sqrt(w))[0])
+
+
+def dark_variance_slope(d: CaptureData):
+    """Slope (DN^2/s) of the dark temporal variance against exposure time (EMVA 1288 R4.0 sec. 4.2: dark
+    current from the variance, which grows by K times the mean's growth when the dark signal is Poisson
+    charge); the variance of a sequence is the 1 %-trimmed mean over pixels of their temporal variance
+    (each frame's mean removed, so a level drifting between frames does not count). A dark level that
+    rises with exposure time without this growth is no dark current (a black level that drifts)."""
+    if not d.dark_series or len({t for t, f in d.dark_series if f.shape[0] >= 2}) < 2:
+        return None
+    t, v, w = [], [], []
+    for ti, f in d.dark_series:
+        if f.shape[0] < 2:
+            continue
+        x = f.astype(np.float64)
+        x -= x.mean(axis=(1, 2), keepdims=True)
+        t.append(float(ti))
+        v.append(float(sst.trim_mean(x.var(axis=0, ddof=1).ravel(), 0.01)))
+        w.append(f.shape[0] - 1.0)
+    return float(np.polyfit(np.array(t), np.array(v), 1, w=np.sqrt(np.array(w)))[0])
 
 
 def dark_slope_map(d: CaptureData) -> np.ndarray | None:

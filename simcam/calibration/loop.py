@@ -23,7 +23,9 @@ Per ISO group of a capture set:
 5. The best candidate is added when its gain exceeds its sampling noise
    (:meth:`simcam.calibration.attribution.Comparison.beats`) and the held-out pixel marginal KL
    (Noise Flow binning, Jeffreys-smoothed model histogram) does not grow beyond ``kl_tolerance``
-   relative plus twice its sampling floor (:func:`simcam.calibration.heldout.kl_floor`); the
+   relative plus twice its sampling floor (:func:`simcam.calibration.heldout.kl_floor`), and it
+   breaks no diagnostic the current model passes on the held-out frames (:meth:`Loop._broken`: a
+   refuted candidate is passed over for the best of the others); the
    structured marginal KL of aggregated noise (:mod:`simcam.calibration.heldout`) and the NLL/dim of
    the model's Gaussian marginal are reported before and after, with every candidate's score.
    Candidates whose gains differ by less than twice their combined standard errors cannot be told
@@ -56,7 +58,7 @@ from .capture import CaptureSet, Sequence
 from .effects import FitContext, card_for, effect_for, excluded_by
 from .fit import base_fit, fit_effect
 from .heldout import KL_EDGES, StructuredKL, kl_counts, kl_floor
-from .model import LoopModel, SimSpec, marginal_variance, site_map
+from .model import LoopModel, SimSpec, marginal_variance, shot_factors, site_map
 from .region import DEFAULT_MAX_PIXELS, DEFAULT_TILE, Region
 from .simulate import simulate_capture
 
@@ -471,7 +473,7 @@ class Loop:
         if form:
             rec["form"] = form
         ctx = FitContext(diagnostic=chosen.name, value=chosen.value, sim_mean=chosen.sim_mean, form=form,
-                         seed=self.cfg.seed * 1000 + tag, simulate=simulate_capture,
+                         seed=self.cfg.seed * 1000 + tag, simulate=simulate_capture, shot_factors=shot_factors,
                          dark_specs=[sp for sp in self.g.specs(model, self.g.fit)
                                      if sp.kind == "dark" and not sp.series_only])
         if card.needs_darks and not ctx.dark_specs:
@@ -530,9 +532,29 @@ class Loop:
             held = run.result()
             kl_ok = held["kl"] <= held_cur["kl"] * (1 + self.cfg.kl_tolerance) + 2 * held_cur["kl_floor"]
             beats = rec.pop("_beats") and "left_race" not in rec
+            broken = self._broken(held, held_cur)
+            if broken:
+                rec["breaks"] = broken
             rec.update({"kl_before": held_cur["kl"], "kl_after": held["kl"], "kl_ok": bool(kl_ok),
-                        "beats_current": bool(beats and kl_ok)})
+                        "beats_current": bool(beats and kl_ok and not broken)})
             out.append((rec, cand, held))
+        return out
+
+    def _broken(self, held: dict, held_cur: dict) -> list[dict]:
+        """The diagnostics a candidate breaks on the held-out frames: those the current model passes
+        (p >= ``alpha``) and the candidate fails beyond the family-wise level (p < ``alpha`` / the number
+        of diagnostics compared, Bonferroni), further from the data than the current model. A candidate
+        that explains one statistic by breaking another is refuted whatever its summed gain (a
+        posterior predictive check, A. Gelman et al., *Bayesian Data Analysis*, 3rd ed., ch. 6): a dark
+        level that rises between exposures, fitted as dark current, predicts a dark variance that rises
+        with it, which a drifting black level does not have."""
+        names = [n for n in self.applicable if held.get(n) is not None and held_cur.get(n) is not None]
+        level = self.cfg.alpha / max(len(names), 1)
+        out = []
+        for n in names:
+            a, b = held[n], held_cur[n]
+            if a.p < level and b.p >= self.cfg.alpha and abs(a.z) > abs(b.z):
+                out.append({"diagnostic": n, "z": float(a.z), "p": float(a.p), "z_before": float(b.z)})
         return out
 
     def _floor_map(self) -> dict:
@@ -598,6 +620,8 @@ class Loop:
             by_rec = {id(t[0]): t for t in scored}
             tried = [by_rec.get(id(rec), (rec, None, None)) for rec, _c in fits]
             scored = [t for t in scored if "left_race" not in t[0]] or scored  # all left: none beats
+            # a candidate that breaks a diagnostic the current model passes is refuted: the best of the others
+            scored = [t for t in scored if not t[0].get("breaks")] or scored
             best = max(scored, key=lambda t: t[0]["heldout_gain"]) if scored else None
             if best is not None and self.preferred:
                 # candidates the held-out frames cannot tell apart from the best: one the sensor's other ISOs
@@ -655,6 +679,8 @@ class Loop:
                 f"{r['effect']}: {r['skipped']}" if "skipped" in r else
                 f"{r['effect']}: held-out gain {r['heldout_gain']:.3g} ± {r['heldout_gain_sd']:.2g} nats"
                 + ("" if r["kl_ok"] else ", pixel KL grew")
+                + "".join(f", breaks {b['diagnostic']} (held-out z {b['z_before']:.2g} -> {b['z']:.2g})"
+                          for b in r.get("breaks", ()))
                 + (f" (left the race: {r['left_race']})" if "left_race" in r else "")
                 for r, _c, _h in tried)
             for ds in proposals.values():

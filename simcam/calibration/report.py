@@ -73,7 +73,7 @@ FAMILY_DIAGNOSTICS = {
     "column": ("col_temporal_excess", "col_fpn_excess", "col_spectrum_peak"),
     "temporal": ("dsnu_excess", "prnu_excess", "hot_pixel_tail", "col_fpn_excess"),
     "block": ("lag1_corr", "lag2_corr", "dark_checker_jitter", "frame_spectrum_peak"),
-    "frame": ("frame_mean_jitter", "dark_checker_jitter"),
+    "frame": ("frame_mean_jitter", "frame_mean_drift", "dark_checker_jitter"),
 }
 
 
@@ -676,7 +676,10 @@ def _candidates_table(iterations: list[dict]) -> str:
             moved = ", ".join(f"{m['diagnostic']} {m['gain']:+.3g}" for m in c["moved_most"])
             chosen = ("" if not c["chosen"] else
                       f"yes (tied: {html.escape(c['tie_broken_by'])})" if c.get("tie_broken_by") else "yes")
+            breaks = "; ".join(f"{b['diagnostic']} held-out z {b['z_before']:.2g} → {b['z']:.2g}"
+                               for b in c.get("breaks", ()))
             verdict = (f"no (left the race: {html.escape(c['left_race'])})" if c.get("left_race") else
+                       f"no (breaks {html.escape(breaks)})" if breaks else
                        "no" if c["kl_ok"] else "no (pixel KL grew)")
             several = len(c["proposed_by"]) > 1 and c.get("fitted_from")
             name = c["effect"] + (f" ({c['form']})" if c.get("form") else "") + (

@@ -62,7 +62,7 @@ EXAMPLES = {
     "empirical_offset": EmpiricalOffset(quantiles_dn=[float(x) for x in np.linspace(-3.0, 3.0, 33) ** 3 / 9]),
 }
 #: diagnostics that by design propose no effect (outside the vocabulary)
-UNATTRIBUTED = {"dark_checker_jitter"}
+UNATTRIBUTED = {"dark_checker_jitter", "frame_mean_drift"}  # no effect of the vocabulary makes them
 WHITE, BLACK = 1023.0, 64.0
 FS = WHITE - BLACK
 

@@ -55,7 +55,7 @@ def test_nonlinearity_fit_beside_charge_sharing_keeps_the_system_gain(c_nl):
     model = model_with_sharing(1.3 * K_TRUE)  # the current K is off: the fit re-estimates it
     model.var_dark_dn2 = r
     fit = card_for("nonlinearity").fit(PTC(darks, flats), model, FitContext(diagnostic="ptc_curvature", value=0.0,
-                                                                            sim_mean=0.0))
+                                                                            sim_mean=0.0, shot_factors=shot_factors))
     assert fit.K == pytest.approx(K_TRUE, rel=1e-3)
     assert fit.params.c == pytest.approx(c_nl, abs=1e-3)
 
@@ -69,6 +69,7 @@ def test_channel_gain_fit_beside_charge_sharing_keeps_the_system_gain():
     flats = [np.column_stack([BLACK + x * g, K_TRUE * F_SHARE * g * (x * g) + r]) for x in (0.2 * S, 0.6 * S)]
     model = model_with_sharing(K_TRUE)
     fit = card_for("channel_gain").fit(PTC(darks, flats), model, FitContext(diagnostic="plane_gain_spread",
-                                                                            value=0.0, sim_mean=0.0))
+                                                                            value=0.0, sim_mean=0.0,
+                                                                            shot_factors=shot_factors))
     assert fit.K == pytest.approx(K_TRUE, rel=1e-3)
     np.testing.assert_allclose(fit.params.gains, g, rtol=1e-3)

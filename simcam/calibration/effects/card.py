@@ -167,11 +167,13 @@ class FitContext:
     an indirect fit's simulations; ``dark_specs``: the dark sequences as
     :class:`~simcam.calibration.model.SimSpec`; ``simulate``: the loop's bootstrap,
     :func:`simcam.calibration.simulate.simulate_capture` (passed in: the cards sit below the
-    simulator, which converts models through them).
+    simulator, which converts models through them); ``shot_factors``: the factor the current model's
+    effects put on the shot-noise term at given flat levels,
+    :func:`simcam.calibration.model.shot_factors` (passed in for the same reason; None: 1).
 
     Parameters
     ----------
-    diagnostic, value, sim_mean, seed, dark_specs, simulate
+    diagnostic, value, sim_mean, seed, dark_specs, simulate, shot_factors
         As described above; all have defaults ("no such information").
 
     Attributes
@@ -192,8 +194,14 @@ class FitContext:
     seed: int = 0
     dark_specs: Sequence = ()
     simulate: Callable | None = None
+    shot_factors: Callable | None = None
     #: the form to fit, for a card with several forms from one diagnostic (:meth:`EffectCard.variants`)
     form: str = ""
+
+    def shot_factor(self, model, y: np.ndarray) -> np.ndarray:
+        """``shot_factors(model, y)``, or ones (shape of ``y`` as 2-D) when none was passed in."""
+        y = np.atleast_2d(np.asarray(y, dtype=np.float64))
+        return np.ones_like(y) if self.shot_factors is None else self.shot_factors(model, y)
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,7 @@ beta1 per channel). It enters the closed-form marginal through the shot-noise te
 the base.
 
 Fit. Per-plane photon-transfer slopes k_c (``plane_gain_spread``), each divided by the factor the
-model's other effects put on the shot term (:func:`simcam.calibration.model.shot_factors`; charge
+model's other effects put on the shot term (``FitContext.shot_factor``; charge
 sharing lowers it): ``g = k / mean(k)``, and the system gain K is re-estimated as ``mean(k)``.
 
 Profile. A gain after photon counting changes the variance-to-mean ratio, so it is written as the
@@ -36,13 +36,11 @@ class ChannelGainCard(DeclaredProfileCard, name="channel_gain", params=ChannelGa
                       null_field="gains", null_value=1.0):
 
     def fit(self, d, model, ctx):
-        from ..model import shot_factors
-
         k = dg.plane_slopes(d)
         darks, flats = d.ptc_points()
         mu0 = np.mean([p[:, 0] for p in darks], axis=0) if darks else model.black_dn.ravel()
         # the slope each site would have without the model's other effects on the shot term
-        k = k / shot_factors(model, np.array([f[:, 0] for f in flats]) - mu0).mean(axis=0)
+        k = k / ctx.shot_factor(model, np.array([f[:, 0] for f in flats]) - mu0).mean(axis=0)
         g = k / k.mean()
         return Fit(ChannelGain(gains=[float(x) for x in g]), K=float(k.mean()))
 

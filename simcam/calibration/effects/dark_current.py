@@ -10,7 +10,10 @@ time; A. Abdelhamed, *Noise Modelling for Smartphone Cameras*, PhD dissertation,
 DCNU); the loop models it as a log-normal of mean ``rate_e_per_s`` and log-spread ``log_sigma``,
 the law simcam's noise stage draws (:class:`simcam.noise.effects.dark.DarkCurrent`). Only darks at
 two exposure times or more separate it from the black level: at one exposure time a dark current
-is an offset (``black_level_offset``) and its non-uniformity a DSNU.
+is an offset (``black_level_offset``) and its non-uniformity a DSNU. Being Poisson charge, it raises
+the dark temporal variance by K times the dark level's rise (``dark_variance_slope``, EMVA 1288's
+variance method, beside ``dark_signal_slope``): a dark level that rises between exposures without
+that growth (a black level drifting over the capture) scores worse with this effect than without it.
 
 Fit. On the darks at every exposure time (the loop's dark diagnostics use the shortest one only,
 as EMVA 1288 measures the temporal dark noise there): least-squares slopes of the mean dark level
@@ -51,7 +54,8 @@ class DarkCurrent(EffectParams):
                                       default=0.0)
 
 
-class DarkCurrentCard(DeclaredProfileCard, name="dark_current", params=DarkCurrent, diagnostics=("dark_signal_slope",),
+class DarkCurrentCard(DeclaredProfileCard, name="dark_current", params=DarkCurrent,
+                      diagnostics=("dark_signal_slope", "dark_variance_slope"),
                       null_field="rate_e_per_s", refit_after=("amp_glow",)):
 
     def fit(self, d, model, ctx):

@@ -12,7 +12,7 @@ offsets (DSNU, column FPN) and the quantisation come after the response in the s
 Fit. Least squares of the photon-transfer points (``ptc_curvature``):
 ``var(y) = (1 + 2 c x / s)^2 (K g x + r)`` with ``y = x + c x^2 / s`` (s = white - black, r the dark
 variance), relative residuals, K re-estimated with c (c within +-0.45). The shot term carries the
-factor the model's other effects put on it (:func:`simcam.calibration.model.shot_factors`: charge sharing lowers a flat's
+factor the model's other effects put on it (``FitContext.shot_factor``: charge sharing lowers a flat's
 shot variance), so K stays the system gain.
 
 Profile. ``{type: nonlinearity, strength}`` with ``strength = -c`` (the noise stage's
@@ -43,9 +43,7 @@ class NonlinearityCard(EffectCard, name="nonlinearity", params=Nonlinearity, nul
         v = np.array([f[:, 1] for f in flats])
         r = model.var_dark_dn2
         s = model.full_scale_dn
-        from ..model import shot_factors
-
-        g = model.gains() * shot_factors(model, y)
+        g = model.gains() * ctx.shot_factor(model, y)
 
         def resid(p):
             K, c = p
