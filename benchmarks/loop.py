@@ -13,7 +13,8 @@ Measured (shared 2-core machine, load average 2.3-4.5): 0.2 MP 148 s / 1.04 GB, 
 1.22 GB, 3 MP 344 s / 1.27 GB, 12 MP 202 s / 1.48 GB (docs/loop.md), before attribution by held-out
 model comparison. With it (candidates race, replicates on 2 threads, 12 held-out replicates, 448 x 448
 budget, a second look for uncertain candidates): 12 MP 458 s / 2.54 GB, load average 1.6 (docs/loop.md
-has the steps).
+has the steps); session 8: 583 s / 2.53 GB; session 9: 438 s / 2.52 GB with the ISO-100 group stopping
+two iterations early (docs/loop.md).
 
 Usage::
 
