@@ -227,6 +227,21 @@ class CaptureData:
                 self.cache["fmap"] = (f.mean(0), float(np.mean(np.var(f, axis=0, ddof=1))), f.shape[0])
         return self.cache["fmap"]
 
+    def frame_means(self, kind: str) -> list[np.ndarray]:
+        """Each frame's mean (float64), per dark (``kind="dark"``) or flat sequence."""
+        key = f"fmeans_{kind}"
+        if key not in self.cache:
+            seqs = self.darks if kind == "dark" else self.flats
+            self.cache[key] = [f.astype(np.float64).mean(axis=(1, 2)) for f in seqs]
+        return self.cache[key]
+
+    def flat_levels(self, black_dn) -> np.ndarray:
+        """(flats, 4) per-plane flat means above the darks' per-plane mean (above ``black_dn``, per site,
+        without darks): the photon-transfer points' signal."""
+        darks, flats = self.ptc_points()
+        mu0 = np.mean([p[:, 0] for p in darks], axis=0) if darks else np.asarray(black_dn, np.float64).ravel()
+        return np.array([f[:, 0] for f in flats]) - mu0
+
     def ptc_points(self):
         """Per plane (mean, temporal var) of each dark and flat sequence (frame means removed)."""
         if "ptc" not in self.cache:
@@ -826,8 +841,7 @@ def frame_mean_jitter(d: CaptureData):
     ref = float(np.mean([x.mean() for x in d.darks])) if d.darks else (
         float(np.mean(d.black_dn)) if d.black_dn is not None else 0.0)
     vals = []
-    for f in d.flats:
-        means = f.astype(np.float64).mean(axis=(1, 2))
+    for means in d.frame_means("flat"):
         if means.size < 2:
             continue
         vals.append(_ratio(0.5 * np.mean(np.diff(means) ** 2), (means.mean() - ref) ** 2,
@@ -844,10 +858,9 @@ def frame_mean_drift(d: CaptureData):
     when the level drifts over the sequence (a black level or a gain that warms up), negative when it
     alternates. No effect of the vocabulary drifts: the bootstrap null is that of independent frames."""
     vals = []
-    for f in [*d.darks, *d.flats]:
-        if f.shape[0] < 4:
+    for m in [*d.frame_means("dark"), *d.frame_means("flat")]:
+        if m.size < 4:
             continue
-        m = f.astype(np.float64).mean(axis=(1, 2))
         msd = 0.5 * float(np.mean(np.diff(m) ** 2))
         v = float(np.var(m, ddof=1))
         if msd > 0 and v > 0:

@@ -9,6 +9,7 @@ quadratic response ``y = x + c x^2 / s`` and its delta-method variance), not fro
 import numpy as np
 import pytest
 
+from simcam.calibration import diagnostics as dg
 from simcam.calibration.effects import FitContext, card_for
 from simcam.calibration.model import LoopModel, shot_factors
 
@@ -20,7 +21,7 @@ F_SHARE = (1 - 4 * C_SHARE) ** 2 + 4 * C_SHARE ** 2
 
 
 class PTC:
-    """Stands in for the capture statistics: only ``ptc_points`` is read by these fits."""
+    """Stands in for the capture statistics: these fits read only the photon-transfer points."""
 
     def __init__(self, darks, flats):
         self._p = (darks, flats)
@@ -28,6 +29,8 @@ class PTC:
 
     def ptc_points(self):
         return self._p
+
+    flat_levels = dg.CaptureData.flat_levels  # (reads ptc_points only)
 
 
 def model_with_sharing(K):

@@ -37,10 +37,8 @@ class ChannelGainCard(DeclaredProfileCard, name="channel_gain", params=ChannelGa
 
     def fit(self, d, model, ctx):
         k = dg.plane_slopes(d)
-        darks, flats = d.ptc_points()
-        mu0 = np.mean([p[:, 0] for p in darks], axis=0) if darks else model.black_dn.ravel()
         # the slope each site would have without the model's other effects on the shot term
-        k = k / ctx.shot_factor(model, np.array([f[:, 0] for f in flats]) - mu0).mean(axis=0)
+        k = k / ctx.shot_factor(model, d.flat_levels(model.black_dn)).mean(axis=0)
         g = k / k.mean()
         return Fit(ChannelGain(gains=[float(x) for x in g]), K=float(k.mean()))
 

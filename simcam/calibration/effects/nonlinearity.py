@@ -37,9 +37,8 @@ class NonlinearityCard(EffectCard, name="nonlinearity", params=Nonlinearity, nul
         """Least squares of var(y) = (1 + 2c x/s)^2 (K g x + r) with y = x + c x^2/s over the PTC points."""
         from scipy.optimize import least_squares
 
-        darks, flats = d.ptc_points()
-        mu0 = np.mean([p[:, 0] for p in darks], axis=0) if darks else model.black_dn.ravel()
-        y = np.array([f[:, 0] for f in flats]) - mu0
+        _darks, flats = d.ptc_points()
+        y = d.flat_levels(model.black_dn)
         v = np.array([f[:, 1] for f in flats])
         r = model.var_dark_dn2
         s = model.full_scale_dn
