@@ -55,8 +55,9 @@ ALIASES = {"stuck_pixels": "dead_pixels"}
 def judge(truth_effects: set[str], report: dict) -> dict:
     """Compare one loop report with the generator's truth (see the module docstring)."""
     named = set()
-    unexplained, kl_rows = set(), []
+    unexplained, kl_rows, added = set(), [], {}
     for g in report["isos"]:
+        added[g["iso_label"]] = list(g["effects"])
         named |= {e for e in g["effects"] if not e.startswith("empirical_")}
         unexplained |= {u["diagnostic"] for u in g["unexplained"]}
         h = g["heldout"]
@@ -73,7 +74,7 @@ def judge(truth_effects: set[str], report: dict) -> dict:
             grew.append(f"{label} {b:.3g}->{f:.3g}")
         if added and b > 0.05 and f > 0.2 * b:
             low_drop.append(f"{label} {b:.3g}->{f:.3g}")
-    return {"named": sorted(named), "missed": missed, "wrong": wrong, "unexplained": sorted(unexplained),
+    return {"named": sorted(named), "added": added, "missed": missed, "wrong": wrong, "unexplained": sorted(unexplained),
             "kl": kl_rows, "kl_grew": grew, "kl_drop_below_80": low_drop,
             "ok": not missed and not wrong and not grew}
 

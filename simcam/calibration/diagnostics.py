@@ -24,6 +24,9 @@ dark_checker_jitter     (none)              log of: var over dark frames of the 
                                             (pixel var / pixels)
 col_fpn_excess          column_fpn          cov(column means of even- and odd-frame dark mean maps) /
                                             (map var / H)
+col_fpn_spectrum_peak   empirical_lines     max / median of the periodogram of the mean of those two
+                                            column profiles (a periodic fixed column pattern), as the
+                                            normal quantile of its tail under white noise
 dsnu_excess             dsnu                5-sigma-clipped var of the dark mean map (rows/cols removed) /
                                             (temporal var with rows/cols removed / n)
 hot_pixel_tail          hot_pixels          fraction of pixels whose dark temporal median is
@@ -40,8 +43,8 @@ dark_signal_slope       dark_current        least-squares slope of the dark leve
 dark_variance_slope     dark_current        least-squares slope of the dark temporal variance (1 %-trimmed
                                             mean over pixels, frame means removed) against exposure time
                                             (DN^2/s; EMVA 1288's variance method)
-frame_mean_jitter       frame_flicker       frame-to-frame var of flat frame means (half the mean square
-                                            successive difference) / signal^2
+frame_mean_jitter       frame_flicker       frame-to-frame var of flat frame means (from their successive
+                                            differences about their mean) / signal^2
 frame_mean_drift        (none)              log(var of frame means / half their mean square successive
                                             difference), darks and flats (a level drifting over frames)
 dark_tail_mass          heavy_tail_read     fraction of dark residuals beyond 4 IQR-sigma
@@ -85,7 +88,8 @@ PLANE_OFFSETS = ((0, 0), (0, 1), (1, 0), (1, 1))
 #: (``dark_checker_jitter``) proposes none; ``col_temporal_excess`` proposes an empirical component.
 DIAGNOSTICS = (
     "ptc_curvature", "plane_gain_spread", "row_mean_excess", "row_spectrum_peak", "col_spectrum_peak",
-    "col_temporal_excess", "dark_checker_jitter", "col_fpn_excess", "dsnu_excess", "hot_pixel_tail", "prnu_excess",
+    "col_temporal_excess", "dark_checker_jitter", "col_fpn_excess", "col_fpn_spectrum_peak", "dsnu_excess",
+    "hot_pixel_tail", "prnu_excess",
     "black_offset", "dark_signal_slope", "dark_variance_slope", "frame_mean_jitter", "frame_mean_drift",
     "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "lag1_corr",
     "lag2_corr", "defect_pixels", "glow_field",
@@ -115,6 +119,7 @@ NEEDS = {
     "col_spectrum_peak": "needs a dark or flat sequence",
     "dark_checker_jitter": "needs a dark sequence",
     "col_fpn_excess": "needs a dark or flat sequence",
+    "col_fpn_spectrum_peak": "needs a dark or flat sequence",
     "dsnu_excess": "needs a dark sequence",
     "hot_pixel_tail": "needs a dark sequence",
     "prnu_excess": "needs a flat sequence",
@@ -638,6 +643,49 @@ def col_fpn_excess(d: CaptureData):
     return _ratio(cov, 0.5 * (va + vb) / h, "the variance of the even/odd-frame mean maps")
 
 
+def column_profile_spectrum(d: CaptureData) -> tuple[np.ndarray, np.ndarray, int] | None:
+    """Spectrum of the fixed column pattern, from :func:`column_profiles`: (periodogram of the mean of the
+    even- and odd-frame profiles, ``|rfft|^2``; cross-periodogram of the two as each bin's share of
+    their covariance, ``2 Re(A_k conj(B_k)) / W^2``, 1 at 0 and W/2, whose sum over the bins is
+    :func:`col_fpn_excess`'s numerator; the width W), both from bin 1 (the mean is 0). The temporal
+    noise, independent between the halves, cancels from the cross-periodogram in expectation."""
+    if "colspec" not in d.cache:
+        prof = column_profiles(d)
+        if prof is None:
+            d.cache["colspec"] = None
+        else:
+            (ca, _, _), (cb, _, _) = prof
+            a, b = np.fft.rfft(ca - ca.mean()), np.fft.rfft(cb - cb.mean())
+            w = ca.size
+            share = 2.0 * np.real(a * np.conj(b)) / w ** 2
+            if w % 2 == 0:
+                share[-1] /= 2
+            d.cache["colspec"] = (np.abs((a + b) / 2)[1:] ** 2, share[1:], w)
+    return d.cache["colspec"]
+
+
+def col_fpn_spectrum_peak(d: CaptureData):
+    """The largest bin of the periodogram of the fixed column profile (bins 1 .. (W - 1) / 2) as a normal
+    quantile: for a white column pattern (``column_fpn``'s independent offsets, DSNU averaged down the
+    columns, temporal noise) the n bins are independent exponentials, the largest over the median
+    times log 2 (the exponential's median) exceeds x with probability ``1 - (1 - exp(-x))^n``, and
+    the statistic is the normal quantile of that tail (so the bootstrap's normal comparison holds in
+    the far tail, where the maximum's own law is skewed); a periodic column pattern (column ADCs
+    interleaved with an offset mismatch: EMVA 1288 Release 4.0, sec. 8, the horizontal spectrogram of
+    the DSNU) puts it far out."""
+    spec = column_profile_spectrum(d)
+    if spec is None:
+        return None
+    # the Nyquist bin (a period of two columns: the CFA's column parity, which the planes' centring
+    # touches) is real-valued, a chi-square of 1 degree of freedom, and left out
+    p = spec[0][: (spec[2] - 1) // 2]
+    if p.size < 4:
+        raise NotApplicable(f"a column profile of {spec[2]} columns has fewer than 4 frequencies")
+    x = _ratio(float(p.max()), float(np.median(p)), "the median of the column profile's periodogram") * math.log(2)
+    log_tail = math.log(p.size) - x if x > 30 else math.log(-math.expm1(p.size * math.log1p(-math.exp(-x))))
+    return float(-ndtri_exp(log_tail))
+
+
 def dsnu_excess(d: CaptureData):
     dm = d.dark_map()
     if dm is None:
@@ -832,10 +880,12 @@ def black_offset(d: CaptureData):
 
 def frame_mean_jitter(d: CaptureData):
     """Frame-to-frame variance of the flat frame means over the squared signal above dark, the variance
-    taken as half the mean square successive difference (J. von Neumann, "Distribution of the ratio of
-    the mean square successive difference to the variance", Ann. Math. Statist. 12, 1941): the same as
-    the sample variance for frame means independent from frame to frame (flicker), blind to a level that
-    drifts slowly over the sequence (:func:`frame_mean_drift` sees that)."""
+    taken from their successive differences about the differences' mean (J. von Neumann, "Distribution
+    of the ratio of the mean square successive difference to the variance", Ann. Math. Statist. 12, 1941,
+    takes them about 0): unbiased for frame means independent from frame to frame (flicker; E[sum (d -
+    mean d)^2] = 2 sigma^2 (m - 1/m) for m differences), blind to a level that drifts slowly over the
+    sequence (a linear drift adds the same step to every difference; :func:`frame_mean_drift` sees it).
+    A sequence of 2 frames has one difference, taken about 0."""
     if not d.flats:
         return None
     ref = float(np.mean([x.mean() for x in d.darks])) if d.darks else (
@@ -844,7 +894,11 @@ def frame_mean_jitter(d: CaptureData):
     for means in d.frame_means("flat"):
         if means.size < 2:
             continue
-        vals.append(_ratio(0.5 * np.mean(np.diff(means) ** 2), (means.mean() - ref) ** 2,
+        dm = np.diff(means)
+        m = dm.size
+        # E[sum (d - mean d)^2] = 2 sigma^2 (m - 1/m) for m differences of independent frame means
+        var = (float(np.sum((dm - dm.mean()) ** 2)) / (2 * (m - 1 / m)) if m >= 2 else 0.5 * float(dm[0] ** 2))
+        vals.append(_ratio(var, (means.mean() - ref) ** 2,
                            "the flat's squared signal above dark"))
     if not vals:
         raise NotApplicable("no flat sequence of >= 2 frames")

@@ -70,8 +70,8 @@ FAMILY_DIAGNOSTICS = {
     "pixel": ("dsnu_excess", "hot_pixel_tail", "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "prnu_excess",
               "ptc_curvature", "plane_gain_spread", "black_offset"),
     "row": ("row_mean_excess", "row_spectrum_peak"),
-    "column": ("col_temporal_excess", "col_fpn_excess", "col_spectrum_peak"),
-    "temporal": ("dsnu_excess", "prnu_excess", "hot_pixel_tail", "col_fpn_excess"),
+    "column": ("col_temporal_excess", "col_fpn_excess", "col_fpn_spectrum_peak", "col_spectrum_peak"),
+    "temporal": ("dsnu_excess", "prnu_excess", "hot_pixel_tail", "col_fpn_excess", "col_fpn_spectrum_peak"),
     "block": ("lag1_corr", "lag2_corr", "dark_checker_jitter", "frame_spectrum_peak"),
     "frame": ("frame_mean_jitter", "frame_mean_drift", "dark_checker_jitter"),
 }
@@ -665,13 +665,14 @@ def _candidates_table(iterations: list[dict]) -> str:
         return ""
     rows = ["<h3>Candidates per iteration (held-out synthetic log-likelihood gain over the current model)</h3>"
             "<table><tr><th>#</th><th>candidate</th><th>proposed by</th><th>gain (nats)</th><th>± SD</th>"
-            "<th>replicates</th><th>statistics that moved most</th><th>pixel KL after</th><th>beats current</th>"
+            "<th>replicates</th><th>statistics that moved most</th><th>pixel KL after</th><th>structured KL after</th>"
+            "<th>beats current</th>"
             "<th>chosen</th></tr>"]
     for i, it in enumerate(iterations, 1):
         for c in it.get("candidates", []):
             if "skipped" in c:
                 rows.append(f"<tr><td>{i}</td><td class=l>{c['effect']}</td><td class=l>{', '.join(c['proposed_by'])}</td>"
-                            f"<td colspan=7 class=l>{html.escape(c['skipped'])}</td></tr>")
+                            f"<td colspan=8 class=l>{html.escape(c['skipped'])}</td></tr>")
                 continue
             moved = ", ".join(f"{m['diagnostic']} {m['gain']:+.3g}" for m in c["moved_most"])
             chosen = ("" if not c["chosen"] else
@@ -680,14 +681,14 @@ def _candidates_table(iterations: list[dict]) -> str:
                                for b in c.get("breaks", ()))
             verdict = (f"no (left the race: {html.escape(c['left_race'])})" if c.get("left_race") else
                        f"no (breaks {html.escape(breaks)})" if breaks else
-                       "no" if c["kl_ok"] else "no (pixel KL grew)")
+                       f"no (held-out error grew: {html.escape(c['error_grew'])})" if c.get("error_grew") else "no")
             several = len(c["proposed_by"]) > 1 and c.get("fitted_from")
             name = c["effect"] + (f" ({c['form']})" if c.get("form") else "") + (
                 f" (fitted from {c['fitted_from']})" if several else "")
             rows.append(f"<tr><td>{i}</td><td class=l>{name}</td><td class=l>{', '.join(c['proposed_by'])}</td>"
                         f"<td>{_fmt(c['heldout_gain'])}</td><td>{_fmt(c['heldout_gain_sd'])}</td>"
                         f"<td>{c.get('replicates', '')}</td><td class=l>{html.escape(moved)}</td><td>{_fmt(c['kl_after'])}</td>"
-                        f"<td>{'yes' if c['beats_current'] else verdict}</td>"
+                        f"<td>{_fmt(c.get('kl_structured_after'))}</td><td>{'yes' if c['beats_current'] else verdict}</td>"
                         f"<td>{chosen}</td></tr>")
     rows.append("</table>")
     return "".join(rows)

@@ -329,6 +329,10 @@ def empirical_gain(group: Group, x, ctx: Ctx, st: EffectState):
     return x * st.fixed("gain")
 
 
+def empirical_lines(group: Group, x, ctx: Ctx, st: EffectState):
+    return x + st.fixed("offset")
+
+
 #: torch implementation of every effect type (the registry test checks this against simcam's effect registry).
 EFFECTS = {
     "prnu": prnu, "channel_gain": channel_gain, "frame_flicker": frame_flicker, "row_noise": row_noise,
@@ -338,6 +342,7 @@ EFFECTS = {
     "dead_pixels": dead_pixels, "rtn": rtn, "charge_crosstalk": charge_crosstalk, "adc_dnl": adc_dnl,
     "empirical_code": empirical_code, "dark_current": dark_current, "amp_glow": amp_glow,
     "empirical_field": empirical_field, "empirical_offset": empirical_offset, "empirical_gain": empirical_gain,
+    "empirical_lines": empirical_lines,
 }
 
 #: fixed-draw keys that are 1-D tables, not maps (kept per distinct model, never cropped).
@@ -386,6 +391,8 @@ def fixed_arrays(effect, fixed: dict[str, Any], shape: tuple[int, int]) -> dict[
         return {"offset": _map3(fixed["offset"], shape)}
     if t == "empirical_gain":
         return {"gain": _map3(fixed["gain"], shape)}
+    if t == "empirical_lines":
+        return {"offset": _map3(fixed["offset"], shape)}
     if effect.type == "column_fpn":
         return {"col": np.asarray(fixed["col"], np.float64)[:w].reshape(1, 1, w)}
     if effect.type == "dsnu":

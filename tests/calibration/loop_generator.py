@@ -41,6 +41,9 @@ seed eq. 3.6 for the Poisson-Gaussian core)::
   sensor (sorted), instead of rounding: codes of unequal width (differential non-linearity).
 * ``column_noise`` N(0, s^2) per frame and column: deliberately *outside* simcam's effect
   vocabulary (temporal column noise), to test that the loop reports it as unexplained.
+* ``interleaved_columns``: columns in groups of ``period_px / 2`` alternate between two converters whose
+  offsets differ by ``offset_dn`` (fixed, no random draw): also outside the vocabulary (a periodic
+  column pattern, ``empirical_lines``).
 * ``checker_offset`` N(0, s^2) per frame, added with opposite signs to the 00/11 and the 01/10
   sites (interleaved readout channels, as in the EMVA 1288 CCD data): also outside the vocabulary.
 """
@@ -144,6 +147,10 @@ class HiddenEffectSensor:
             self.offset += rng.normal(0, eff["dsnu"]["sigma_dn"], (h, w))
         if "column_fpn" in eff:
             self.offset += rng.normal(0, eff["column_fpn"]["sigma_dn"], (1, w))
+        if "interleaved_columns" in eff:  # NOT in the vocabulary: two column converters' offset mismatch
+            p = eff["interleaved_columns"]
+            half = int(p["period_px"]) // 2
+            self.offset += np.where((np.arange(w) // half) % 2 == 0, 0.5, -0.5)[None, :] * p["offset_dn"]
         if "hot_pixels" in eff:
             p = eff["hot_pixels"]
             hot = rng.random((h, w)) < p["fraction"]

@@ -46,21 +46,24 @@ def test_frame_mean_drift_is_zero_for_independent_frames_and_large_for_a_drift()
 
 def test_frame_mean_jitter_sees_flicker_not_a_slow_drift():
     sigma = 0.01
-    flick, drift, plain = [], [], []
+    flick, drift, plain, steep = [], [], [], []
     for seed in range(30):
         rng = np.random.default_rng(seed)
         d = [frames(rng, 8)]
         plain.append(dg.frame_mean_jitter(capture(d, [frames(rng, 12, 1000.0)])))
         flick.append(dg.frame_mean_jitter(capture(d, [frames(rng, 12, 1000.0, gains=1 + sigma * rng.normal(size=12))])))
         drift.append(dg.frame_mean_jitter(capture(d, [frames(rng, 12, 1000.0, gains=np.linspace(1, 1.01, 12))])))
-    plain, flick, drift = map(np.array, (plain, flick, drift))
+        steep.append(dg.frame_mean_jitter(capture(d, [frames(rng, 12, 1000.0, gains=np.linspace(1, 1.05, 12))])))
+    plain, flick, drift, steep = map(np.array, (plain, flick, drift, steep))
     # flicker: sigma^2 above the shot and read part (closed form of an independent per-frame gain)
     excess = flick.mean() - plain.mean()
     se = np.hypot(flick.std(ddof=1), plain.std(ddof=1)) / np.sqrt(flick.size)
     assert abs(excess - sigma ** 2) < 4 * se + 0.1 * sigma ** 2
-    # a 1 % gain ramp over 12 frames (steps of 0.09 %): it adds (0.01 / 11)^2 / 2 to the statistic, far
-    # below the 1e-4 of a 1 % flicker, where the sample variance would have added ~1e-5
-    assert drift.mean() - plain.mean() < 0.1 * sigma ** 2
+    # a linear gain ramp adds the same step to every successive difference, taken about their mean: a 1 %
+    # and a 5 % ramp over 12 frames (steps of 0.09 and 0.45 %; about 0 the 5 % one added (0.05 / 11)^2 / 2
+    # = 1e-5, a 0.3 % flicker) leave the statistic where it is without them (the same frames' noise)
+    for ramp in (drift, steep):
+        assert abs(ramp.mean() - plain.mean()) < 4 * np.hypot(ramp.std(ddof=1), plain.std(ddof=1)) / np.sqrt(ramp.size)
 
 
 def test_dark_variance_slope_is_K_squared_times_the_rate_and_zero_for_a_drifting_black():

@@ -22,6 +22,7 @@ from simcam.calibration.effects.column_fpn import ColumnFpn
 from simcam.calibration.effects.dark_current import DarkCurrent
 from simcam.calibration.effects.dead_pixels import DeadPixels
 from simcam.calibration.effects.dsnu import Dsnu
+from simcam.calibration.effects.empirical_lines import EmpiricalLines
 from simcam.calibration.effects.empirical_offset import EmpiricalOffset
 from simcam.calibration.effects.frame_flicker import FrameFlicker
 from simcam.calibration.effects.heavy_tail_read import HeavyTailRead
@@ -60,6 +61,7 @@ EXAMPLES = {
     "adc_dnl": AdcDnl(dnl_sigma=0.2),
     "charge_crosstalk": ChargeCrosstalk(c=0.03),
     "empirical_offset": EmpiricalOffset(quantiles_dn=[float(x) for x in np.linspace(-3.0, 3.0, 33) ** 3 / 9]),
+    "empirical_lines": EmpiricalLines(lines_dn=[[0.25, 1.4], [0.125, 0.5]]),
 }
 #: diagnostics that by design propose no effect (outside the vocabulary)
 UNATTRIBUTED = {"dark_checker_jitter", "frame_mean_drift"}  # no effect of the vocabulary makes them
@@ -77,6 +79,9 @@ def _assert_close(params: EffectParams, want: dict) -> None:
     got = params.to_dict()
     assert list(got) == list(want)
     for k, v in want.items():
+        if isinstance(v, list) and v and isinstance(v[0], list):  # a table (empirical_lines' lines)
+            assert np.asarray(got[k]) == pytest.approx(np.asarray(v), rel=1e-12, abs=1e-12), k
+            continue
         assert got[k] == (v if isinstance(v, str) else pytest.approx(v, rel=1e-12, abs=1e-12)), k
 
 
@@ -88,9 +93,9 @@ def test_every_effect_has_a_card():
     assert {e for e in DIAGNOSTIC_EFFECT.values() if e is not None} == names
     assert {d for d, e in DIAGNOSTIC_EFFECT.items() if e is None} == UNATTRIBUTED
     # the hidden effects of the test generator are the named vocabulary (empirical components stand for
-    # effects outside it: the generator's column_noise)
+    # effects outside it: the generator's column_noise and interleaved_columns)
     assert set(EFFECTS) == {n for n, c in CARDS.items() if c.family is None}
-    assert {n for n, c in CARDS.items() if c.family is not None} == {"empirical_offset"}
+    assert {n for n, c in CARDS.items() if c.family is not None} == {"empirical_offset", "empirical_lines"}
     # every effect type the loop writes to profile.yaml, and every one its bootstrap samples, has a card
     m = _model(dict(EXAMPLES))
     entry, _ = noise_entry(m)
@@ -212,7 +217,9 @@ def _fit_data(name: str, seed: int = 3):
 
     side = 64 if name == "adc_dnl" else 32  # the histogram test needs >= 8 codes holding >= 100 values
     # an empirical component is fitted on the generator's effect outside the vocabulary it stands for
-    effects = {"column_noise": {"sigma_dn": 1.5}} if name == "empirical_offset" else {name: DEFAULT_EFFECTS[name]}
+    outside = {"empirical_offset": {"column_noise": {"sigma_dn": 1.5}},
+               "empirical_lines": {"interleaved_columns": {"offset_dn": 3.0, "period_px": 4}}}
+    effects = outside.get(name) or {name: DEFAULT_EFFECTS[name]}
     spec = SensorSpec(height=side, width=side, effects=effects)
     cs = in_memory_capture(capture_set(spec, n_frames=8, seed=seed))
     return Group(cs.group(800), LoopConfig(), [])

@@ -219,6 +219,30 @@ def test_effect_outside_the_vocabulary_gets_an_empirical_component():
     assert {u["diagnostic"] for u in r.unexplained} <= {"col_spectrum_peak"}
 
 
+@pytest.mark.parametrize("with_fpn", [False, True])
+def test_periodic_column_pattern_gets_its_measured_lines_not_column_fpn(with_fpn):
+    """Two interleaved column converters (columns in pairs alternating, offsets 3 DN apart: the generator's
+    interleaved_columns) make a fixed column pattern of period 4 columns, none of the named effects: it
+    is not forced into column_fpn (independent offsets, a white spectrum) but gets the empirical_lines
+    component, one line at 0.25 cycles per pixel of amplitude 3 / sqrt(2) DN (the pattern's variance,
+    2.25 DN^2, is that of a cosine of that amplitude; the column profile of 6 fit frames x 64 rows holds
+    temporal and DSNU noise of sd ~ 3 / sqrt(384) = 0.15 DN per column, so the line's amplitude is
+    measured to a few %). With the generator's column_fpn (1.5 DN) beside it, both are added."""
+    from loop_matrix import in_memory_capture
+    from simcam.calibration.loop import LoopConfig, run_loop
+
+    effects = {"interleaved_columns": {"offset_dn": 3.0, "period_px": 4}}
+    if with_fpn:
+        effects["column_fpn"] = {"sigma_dn": 1.5}
+    r = run_loop(in_memory_capture(capture_set(SensorSpec(effects=effects))), LoopConfig())[0]
+    assert set(r.model.effects) == ({"empirical_lines", "column_fpn"} if with_fpn else {"empirical_lines"})
+    it = next(i for i in r.iterations if i["accepted"] and i["effect"] == "empirical_lines")
+    assert it["not_in_vocabulary"].startswith("column, fixed, additive")
+    (f, a), *rest = sorted(r.model.effects["empirical_lines"].lines_dn, key=lambda fa: -fa[1])
+    assert f == 0.25 and a == pytest.approx(3.0 / np.sqrt(2), rel=0.1)
+    assert all(x < 0.2 * a for _f, x in rest)
+
+
 def test_checkerboard_frame_offset_outside_the_vocabulary_is_reported_unexplained():
     # a per-frame offset of opposite sign on the 00/11 and 01/10 sites (seen on the EMVA 1288 CCD
     # darks): no effect of the vocabulary makes it, so it must be reported, not forced into one.

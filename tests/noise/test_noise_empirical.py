@@ -83,3 +83,25 @@ def test_empirical_field_scales_with_exposure():
                      np.random.default_rng(1))
         lam = 0.01 * t / 1e-4
         assert abs(x.mean() / 1e-4 - lam) < 5 * np.sqrt(lam / x.size)
+
+
+def test_empirical_lines_keep_their_frequencies_and_power_with_a_phase_per_sensor():
+    lines = [[0.25, 2e-3], [0.1, 1e-3]]
+    x = comp([{"type": "empirical_lines", "axis": "column", "lines": lines}]).sample(
+        np.zeros((8, 400), np.float32), COND, np.random.default_rng(0))
+    assert np.allclose(x, x[:1])  # one offset per column, the same in every row
+    col = x[0].astype(np.float64)
+    # the power of each line in the periodogram of the columns (400 columns: both on an exact bin)
+    p = np.abs(np.fft.rfft(col)) ** 2 * 2 / col.size ** 2
+    for f, a in lines:
+        assert abs(p[round(f * col.size)] - a * a / 2) < 1e-3 * a * a
+    assert p.sum() == pytest.approx(sum(a * a / 2 for _, a in lines), rel=1e-3)
+    # another sensor seed: the same lines with other phases
+    y = comp([{"type": "empirical_lines", "axis": "column", "lines": lines}], seed=1).sample(
+        np.zeros((8, 400), np.float32), COND, np.random.default_rng(0))
+    assert not np.allclose(x, y)
+    rows = comp([{"type": "empirical_lines", "axis": "row", "lines": [[0.125, 1e-3]]}]).sample(
+        np.zeros((64, 8), np.float32), COND, np.random.default_rng(0))
+    assert np.allclose(rows, rows[:, :1]) and np.ptp(rows[:, 0]) > 1e-3
+    with pytest.raises(Exception, match="lines"):
+        comp([{"type": "empirical_lines", "lines": [[0.7, 1e-3]]}])

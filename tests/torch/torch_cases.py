@@ -69,6 +69,8 @@ EFFECT_CASES = {
                          {"type": "empirical_offset", "axis": "frame", "temporal": True,
                           "quantiles": [-0.004, 0.0, 0.001, 0.006], "scale": 1.5}],
     "empirical_gain": [{"type": "empirical_gain", "axis": "pixel", "quantiles": [0.9, 0.97, 1.0, 1.02, 1.1]}],
+    "empirical_lines": [{"type": "empirical_lines", "axis": "column", "lines": [[0.25, 0.01], [0.1, 0.004]]},
+                        {"type": "empirical_lines", "axis": "row", "lines": [[0.125, 0.006]]}],
 }
 
 #: exposure time (seconds) given to both samplers (exposure-dependent effects).

@@ -16,7 +16,7 @@ from .. import diagnostics as _dg
 from . import (black_level_offset, channel_gain, column_fpn, dark_current, dead_pixels, dsnu, frame_flicker,
                heavy_tail_read, hot_pixels,
                nonlinearity, periodic_pattern, prnu, quantization, row_noise, spatial_correlation)
-from . import adc_dnl, amp_glow, charge_crosstalk, empirical_offset, rtn
+from . import adc_dnl, amp_glow, charge_crosstalk, empirical_lines, empirical_offset, rtn
 from .card import EffectCard, EffectParams, Fit, FitContext, ProfileTerm
 
 __all__ = ["CARDS", "DIAGNOSTIC_EFFECT", "EffectCard", "EffectParams", "Fit", "FitContext", "ProfileTerm",
@@ -40,6 +40,7 @@ CARDS: dict[str, EffectCard] = {c.name: c for c in (
     amp_glow.AmpGlowCard(),
     nonlinearity.NonlinearityCard(),
     column_fpn.ColumnFpnCard(),
+    empirical_lines.EmpiricalLinesCard(),
     dsnu.DsnuCard(),
     hot_pixels.HotPixelsCard(),
     dead_pixels.DeadPixelsCard(),

@@ -8,7 +8,9 @@ offset after the response, it adds sigma^2 to a pixel's variance about the plane
 
 Fit. ``col_fpn_excess``: sigma^2 is the covariance of the column profiles of the even- and
 odd-frame mean maps (darks, else the longest flat); temporal column noise, independent between the
-halves, drops out.
+halves, drops out. The variance of the spectral lines of a periodic column pattern in the model
+(``empirical_lines``, sum of a^2 / 2) is not this effect's: it is taken off, and the fit is repeated
+when those lines join the model.
 
 Profile. ``{type: column_fpn, sigma}`` with sigma on normalised raw, ``sigma_dn / (white - black)``.
 """
@@ -26,10 +28,13 @@ class ColumnFpn(EffectParams):
 
 
 class ColumnFpnCard(OffsetSigmaCard, name="column_fpn", params=ColumnFpn, diagnostics=("col_fpn_excess",),
-                    fixed_pattern=True, marginal_rank=70):
+                    fixed_pattern=True, marginal_rank=70, refit_after=("empirical_lines",)):
 
     def fit(self, d, model, ctx):
-        """sigma_col^2 = covariance of the column profiles of the even- and odd-frame mean maps."""
+        """sigma_col^2 = covariance of the column profiles of the even- and odd-frame mean maps, less the
+        variance of the model's periodic column lines."""
         (ca, _va, _h), (cb, _vb, _) = dg.column_profiles(d)
+        lines = model.effects.get("empirical_lines")
         s2 = float(np.mean((ca - ca.mean()) * (cb - cb.mean())))
+        s2 -= sum(a * a / 2 for _f, a in lines.lines_dn) if lines is not None else 0.0
         return ColumnFpn(sigma_dn=float(np.sqrt(max(s2, 0.0))))

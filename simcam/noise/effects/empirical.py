@@ -13,6 +13,8 @@ probabilities).
   (a map, or a per-sensor draw from ``quantiles``) or temporal (a fresh draw every frame);
 * ``empirical_gain`` — a multiplicative fixed pattern of the expected signal (pixel, row,
   column): a measured PRNU-like map or gain distribution;
+* ``empirical_lines`` — a fixed additive pattern along rows or columns given by its measured
+  spectral lines (frequency, amplitude), phases drawn once per sensor;
 * ``empirical_code`` — the ADC's measured transition levels (DN): the code of each value;
 * ``empirical_field`` — a smooth measured dark field in normalised raw per second (glow-like),
   with its Poisson shot noise through ``electron``.
@@ -103,6 +105,43 @@ class EmpiricalGain(_MapOrQuantiles):
 
     def apply(self, x, ctx):
         return (x * ctx.fixed["gain"][: x.shape[0], : x.shape[1]]).astype(np.float32)
+
+
+@register_effect
+class EmpiricalLines(Effect):
+    """A measured fixed additive pattern along ``axis`` given by its spectral lines: line index ``i``
+    (the column for ``axis: column``) gets ``sum_j a_j cos(2 pi f_j i + phi_j)`` (normalised raw), the
+    phases ``phi_j`` uniform on [0, 2 pi) and drawn once per sensor. Each line adds ``a_j^2 / 2`` to the
+    variance of the line offsets and keeps its frequency whatever the frame's size (a Fourier
+    surrogate: measured amplitudes, random phases; J. Theiler et al., "Testing for nonlinearity in time
+    series: the method of surrogate data", Physica D 58, 1992)."""
+
+    type: Literal["empirical_lines"] = "empirical_lines"
+    axis: Literal["row", "column"] = "column"
+    lines: list[tuple[float, float]] = Field(min_length=1)
+    stack_ok = True
+    logprob_role = "offset"
+
+    @model_validator(mode="after")
+    def _lines(self):
+        for f, a in self.lines:
+            if not (0.0 <= f <= 0.5) or not a >= 0.0:
+                raise ValueError(f"lines: ({f}, {a}): expected (frequency in cycles per pixel in [0, 0.5], "
+                                 "amplitude >= 0)")
+        return self
+
+    def fixed(self, shape, rng):
+        n = shape[0] if self.axis == "row" else shape[1]
+        i = np.arange(n, dtype=np.float64)
+        out = np.zeros(n)
+        for f, a in self.lines:
+            out += a * np.cos(2 * np.pi * f * i + rng.uniform(0.0, 2 * np.pi))
+        out = out.astype(np.float32)
+        return {"offset": out[:, None] if self.axis == "row" else out[None, :]}
+
+    def apply(self, x, ctx):
+        x += ctx.fixed["offset"][: x.shape[-2], : x.shape[-1]]
+        return x
 
 
 @register_effect
