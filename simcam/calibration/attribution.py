@@ -111,26 +111,39 @@ def _scores(values: dict, sims: dict, floors: dict, names: list[str], drop: int 
     return out
 
 
-def compare(values: dict, floors: dict, current: dict, candidate: dict) -> Comparison:
+def _side(values: dict, sims: dict, floors: dict, names: list[str]) -> tuple[np.ndarray, list[np.ndarray]]:
+    """One model's scores: on all its replicates, and with each replicate left out in turn."""
+    R = len(sims[names[0]])
+    return _scores(values, sims, floors, names, None), [_scores(values, sims, floors, names, r) for r in range(R)]
+
+
+def compare(values: dict, floors: dict, current: dict, candidate: dict, cache: dict | None = None) -> Comparison:
     """Held-out synthetic log-likelihood gain of ``candidate`` over ``current`` (module docstring).
 
     ``values``: diagnostic -> its value on the held-out data; ``floors``: diagnostic -> the
     resolution below which its simulated spread is not trusted; ``current`` / ``candidate``:
     diagnostic -> the values on the models' R held-out replicates, replicate r of both drawn from
     the same seed. Statistics missing from either model, or undefined on a replicate, are left out.
+    ``cache``: a dict kept with ``current`` (its scores are the same for every candidate compared with
+    it on the same statistics and replicates).
     """
     names = [n for n in values if values[n] is not None and n in current and n in candidate
              and len(current[n]) == len(candidate[n]) >= 3
              and all(v is not None for v in current[n]) and all(v is not None for v in candidate[n])]
     if not names:
         return Comparison(0.0, 0.0, {}, 0)
-    a = _scores(values, candidate, floors, names, None)
-    b = _scores(values, current, floors, names, None)
     R = len(current[names[0]])
     if any(len(current[n]) != R for n in names):
         raise ValueError("held-out replicates differ in number between the statistics")
-    loo = np.array([np.sum(_scores(values, candidate, floors, names, r) - _scores(values, current, floors, names, r))
-                    for r in range(R)])
+    a, a_loo = _side(values, candidate, floors, names)
+    key = (R, tuple(names))
+    if cache is not None and key in cache:
+        b, b_loo = cache[key]
+    else:
+        b, b_loo = _side(values, current, floors, names)
+        if cache is not None:
+            cache[key] = (b, b_loo)
+    loo = np.array([np.sum(x - y) for x, y in zip(a_loo, b_loo)])
     sd = float(np.sqrt((R - 1) / R * np.sum((loo - loo.mean()) ** 2)))
     per = {n: float(x - y) for n, x, y in zip(names, a, b)}
     return Comparison(float(np.sum(a - b)), sd, per, len(names))

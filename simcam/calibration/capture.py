@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DatasetError
+from .streaming import kernel_input, moments_add
 
 #: A flat is refused when more than this fraction of its pixels sit at the white level.
 SATURATION_LIMIT = 0.01
@@ -115,22 +116,23 @@ class FrameAccumulator:
         self.sat = 0
 
     def add(self, frame: np.ndarray, white: float) -> None:
-        f = np.asarray(frame, dtype=np.float64)
+        frame = kernel_input(frame)
+        if frame.ndim != 2:
+            raise DatasetError(f"expected a 2-D frame, got shape {frame.shape}")
         if self.s1 is None:
-            self.s1, self.s2 = f.copy(), f * f
+            self.s1, self.s2 = np.zeros(frame.shape), np.zeros(frame.shape)
             self.first = np.asarray(frame, dtype=np.float32).copy()
-        else:
-            self.s1 += f
-            self.s2 += f * f
+        tot, sat = moments_add(frame, self.s1, self.s2, float(white))  # one pass (simcam.calibration.streaming)
         if self.n == 1:
+            f = np.asarray(frame, dtype=np.float64)
             a = self.first.astype(np.float64)
             d = a - f
             pv = _site_mean((d - _site_mean(d, full=True)) ** 2) / 2
             pv[4] = float(np.mean((d - d.mean()) ** 2)) / 2
             self.pair = ([_site_mean(a + f) / 2], [pv])
             self.first = None
-        self.means.append(float(f.mean()))
-        self.sat += int(np.count_nonzero(f >= white))
+        self.means.append(tot / frame.size)
+        self.sat += int(sat)
         self.n += 1
 
     def result(self) -> "FrameSummary":

@@ -32,6 +32,8 @@ import numpy as np
 
 from simcam.errors import DatasetError
 
+from .streaming import kernel_input, welford_add
+
 __all__ = [
     "Emva1288Error", "OperatingPoint", "PointAccumulator", "PointStats", "Quantity",
     "Spectrogram", "DefectHistogram", "NonUniformity", "PhotonTransferData", "ChannelResult",
@@ -383,8 +385,6 @@ class PointAccumulator:
         self._mean: list[np.ndarray] = []
         self._m2: list[np.ndarray] = []
         self._frame_means: list[list[float]] = [[] for _ in self.channels]
-        self._delta: np.ndarray | None = None
-        self._tmp: np.ndarray | None = None
 
     def add(self, frame: np.ndarray) -> None:
         a = np.asarray(frame)
@@ -410,18 +410,9 @@ class PointAccumulator:
                 self._m2.append(np.zeros(x.shape, np.float64))
                 self._frame_means[c].append(float(self._mean[c].mean()))
                 continue
-            mean, m2 = self._mean[c], self._m2[c]
-            if self._delta is None or self._delta.shape != x.shape:
-                self._delta = np.empty(x.shape, np.float64)
-                self._tmp = np.empty(x.shape, np.float64)
-            d, t = self._delta, self._tmp
-            np.subtract(x, mean, out=d)          # x - mean_{n-1}
-            np.divide(d, self.n, out=t)
-            mean += t                            # mean_n
-            np.subtract(x, mean, out=t)          # x - mean_n
-            t *= d
-            m2 += t                              # Welford update, no temporaries
-            self._frame_means[c].append(float(np.mean(x, dtype=np.float64)))
+            # Welford's update in one pass over the plane (simcam.calibration.streaming)
+            tot = welford_add(kernel_input(x), self._mean[c], self._m2[c], float(self.n))
+            self._frame_means[c].append(tot / x.size)
 
     def finish(self, keep_map: bool = True) -> list[PointStats]:
         if self.n == 0:
@@ -439,7 +430,7 @@ class PointAccumulator:
                                   None if self.point.photons is None else float(self.point.photons),
                                   self.point.role, self.n, float(mean_map.mean()), var_t, var_stack,
                                   mean_map if keep_map else None, mean_map.shape))
-        self._mean, self._m2, self._delta, self._tmp = [], [], None, None
+        self._mean, self._m2 = [], []
         return out
 
 

@@ -59,6 +59,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .binning import hist_uniform
+
 PLANE_OFFSETS = ((0, 0), (0, 1), (1, 0), (1, 1))
 JEFFREYS = 0.5  # counts added to every model bin
 GATE_Z = 4.0  # a family's excess counts in the structured KL when above GATE_Z sampling SDs
@@ -159,12 +161,12 @@ def data_edges(x: np.ndarray) -> np.ndarray | None:
 
 
 def _aggregates(r: np.ndarray, fixed_in_clean: bool) -> dict[str, tuple[np.ndarray, float]]:
-    """Family -> (values, pixels averaged) for one plane's residual ``r`` (n, h, w)."""
+    """Family -> (values, pixels averaged) for one plane's residual ``r`` (n, h, w); the values keep
+    their shape (the pixel family is ``r`` itself, a strided view of the sequence's frames)."""
     n, h, w = r.shape
-    out = {"pixel": (r.ravel(), 1.0), "row": (r.mean(axis=2).ravel(), float(w)),
-           "column": (r.mean(axis=1).ravel(), float(h))}
+    out = {"pixel": (r, 1.0), "row": (r.mean(axis=2), float(w)), "column": (r.mean(axis=1), float(h))}
     if not fixed_in_clean:  # a temporal-mean reference leaves no temporal mean to compare
-        out["temporal"] = (r.mean(axis=0).ravel(), float(n))
+        out["temporal"] = (r.mean(axis=0), float(n))
     h2, w2 = h // 2 * 2, w // 2 * 2
     if h2 and w2:
         # the 2x2 block means as four strided slices summed (8x faster than a reshape and a mean over
@@ -173,11 +175,24 @@ def _aggregates(r: np.ndarray, fixed_in_clean: bool) -> dict[str, tuple[np.ndarr
         b += r[:, 0:h2:2, 1:w2:2]
         b += r[:, 1:h2:2, 1:w2:2]
         b *= 0.25
-        out["block"] = (b.ravel(), 4.0)
+        out["block"] = (b, 4.0)
     if n >= 2:
         fm = r.mean(axis=(1, 2))
         out["frame"] = (fm - fm.mean(), float(h * w) * n / (n - 1))  # centred: variance (n-1)/n of the raw one
     return out
+
+
+def _scales(residuals: list[np.ndarray]) -> list[np.ndarray]:
+    """Per sequence, the 4 per-plane temporal standard deviations (the white-noise scale of one pixel)."""
+    scales = []
+    for r in residuals:
+        s = []
+        for dy, dx in PLANE_OFFSETS:
+            p = r[:, dy::2, dx::2]
+            v = float(np.mean(np.var(p, axis=0, ddof=1))) if p.shape[0] >= 2 else float(np.var(p))
+            s.append(np.sqrt(max(v, 1e-30)))
+        scales.append(np.asarray(s))
+    return scales
 
 
 def group_values(residuals: list[np.ndarray], fixed: list[bool], scales: list[np.ndarray] | None = None):
@@ -185,20 +200,37 @@ def group_values(residuals: list[np.ndarray], fixed: list[bool], scales: list[np
     standardised by ``scales`` (per sequence, 4 per-plane temporal sds; from the data when None).
     Returns (values, scales)."""
     if scales is None:
-        scales = []
-        for r in residuals:
-            s = []
-            for dy, dx in PLANE_OFFSETS:
-                p = r[:, dy::2, dx::2]
-                v = float(np.mean(np.var(p, axis=0, ddof=1))) if p.shape[0] >= 2 else float(np.var(p))
-                s.append(np.sqrt(max(v, 1e-30)))
-            scales.append(np.asarray(s))
+        scales = _scales(residuals)
     vals: dict[str, list] = {f: [] for f in FAMILIES}
     for r, fic, sc in zip(residuals, fixed, scales):
         for j, (dy, dx) in enumerate(PLANE_OFFSETS):
             for fam, (x, k) in _aggregates(r[:, dy::2, dx::2], fic).items():
-                vals[fam].append(x / (sc[j] / np.sqrt(k)))
+                vals[fam].append(np.ravel(x) / (sc[j] / np.sqrt(k)))
     return vals, scales
+
+
+def group_counts(residuals: list[np.ndarray], fixed: list[bool], scales: list[np.ndarray], edges: dict) -> dict:
+    """The histograms of :func:`group_values` without building them: ``edges`` maps a family to its bin
+    edges (one array, the groups pooled) or to a list of edges per group (``None`` for a group not
+    histogrammed); returns the same structure of counts (:func:`simcam.calibration.binning.hist_uniform`,
+    each group's values scaled in place of a standardised copy)."""
+    out = {fam: ([None if e is None else np.zeros(e.size - 1, np.int64) for e in ed] if isinstance(ed, list)
+                 else np.zeros(ed.size - 1, np.int64)) for fam, ed in edges.items()}
+    gi = 0
+    for r, fic, sc in zip(residuals, fixed, scales):
+        for j, (dy, dx) in enumerate(PLANE_OFFSETS):
+            for fam, (x, k) in _aggregates(r[:, dy::2, dx::2], fic).items():
+                if fam not in edges:
+                    continue
+                ed = edges[fam]
+                scale = float(np.sqrt(k) / sc[j])
+                if isinstance(ed, list):
+                    if ed[gi] is not None:
+                        hist_uniform(x, ed[gi], scale, out[fam][gi])
+                else:
+                    hist_uniform(x, ed, scale, out[fam])
+            gi += 1
+    return out
 
 
 class StructuredKL:
@@ -208,7 +240,8 @@ class StructuredKL:
     def __init__(self, real: list[np.ndarray], fixed: list[bool]):
         self.fixed = fixed
         dvals, self.scales = group_values(real, fixed)
-        self.fams = {}  # family -> list of (weight, edges, data counts, per-replicate model counts), ntot
+        self.fams = {}  # family -> list of (weight, edges, data counts, per-replicate model counts, group), ntot
+        self.edges: dict = {}  # family -> edges (groups pooled) or per-group edges (pixel): group_counts' bins
         for fam in FAMILIES:
             groups = dvals[fam]
             if not groups:
@@ -216,28 +249,41 @@ class StructuredKL:
             hists = []
             if fam == "pixel":  # joint law of (group, value): group-weighted mean of per-group KLs
                 ntot = sum(g.size for g in groups)
+                per = []
                 for gi, g in enumerate(groups):
                     edges = data_edges(g)
+                    per.append(edges)
                     if edges is not None:
-                        hists.append((g.size / ntot, edges, np.histogram(g, edges)[0], [], gi))
+                        hists.append((g.size / ntot, edges, hist_uniform(g, edges), [], gi))
+                if hists:
+                    self.edges[fam] = per
             else:  # groups pooled (values standardised per group)
                 x = np.concatenate(groups)
                 ntot = x.size
                 edges = data_edges(x)
                 if edges is not None:
-                    hists.append((1.0, edges, np.histogram(x, edges)[0], [], None))
+                    hists.append((1.0, edges, hist_uniform(x, edges), [], None))
+                    self.edges[fam] = edges
             if hists:
                 self.fams[fam] = (hists, ntot)
+
+    def fresh(self) -> "StructuredKL":
+        """A new accumulator on the same data (its values, scales, bins and counts shared, no replicates):
+        models whose held-out residuals are the same bytes need the data side once."""
+        new = object.__new__(StructuredKL)
+        new.fixed, new.scales, new.edges = self.fixed, self.scales, self.edges
+        new.fams = {fam: ([(w, e, nc, [], gi) for w, e, nc, _m, gi in hists], ntot)
+                    for fam, (hists, ntot) in self.fams.items()}
+        return new
 
     def counts(self, sim: list[np.ndarray]) -> list[np.ndarray]:
         """One simulated replicate's histograms, in the order :meth:`add_counts` takes them (reads the
         accumulator only: replicates may be histogrammed in parallel threads)."""
-        mv = group_values(sim, self.fixed, self.scales)[0]
+        got = group_counts(sim, self.fixed, self.scales, self.edges)
         out = []
         for fam, (hists, _n) in self.fams.items():
-            for _w, edges, _nc, _mcs, gi in hists:
-                x = mv[fam][gi] if gi is not None else np.concatenate(mv[fam])
-                out.append(np.histogram(x, edges)[0])
+            for _w, _edges, _nc, _mcs, gi in hists:
+                out.append(got[fam][gi] if gi is not None else got[fam])
         return out
 
     def add_counts(self, counts: list[np.ndarray]) -> None:

@@ -18,8 +18,9 @@ Per ISO group of a capture set:
    each candidate are simulated on the held-out sequences with the same random streams, and each
    candidate is scored by the held-out synthetic log-likelihood of all applicable diagnostics
    (gain over the current model, with its jackknife standard error). Candidates race: each gets
-   :data:`RACE_REPLICATES` held-out replicates, and only those still within reach of the leader
-   (or of the minimum gain) get the rest, so a clear loser costs a third of a full scoring.
+   the first of :data:`RACE_STAGES` held-out replicates, and only those still within reach of the leader
+   (or of the minimum gain) after each stage get the next, so a clear loser costs a third of a full
+   scoring.
 5. The best candidate is added when its gain exceeds its sampling noise
    (:meth:`simcam.calibration.attribution.Comparison.beats`), it does not make the held-out error
    grow (:func:`error_grew`: the structured marginal KL of aggregated noise,
@@ -49,6 +50,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import hashlib
 import os
 
 import numpy as np
@@ -56,6 +58,7 @@ import numpy as np
 from ..errors import DatasetError
 from . import diagnostics as dg
 from .attribution import MIN_GAIN, compare
+from .binning import hist_uniform
 from .capture import CaptureSet, Sequence
 from .effects import FitContext, card_for, effect_for, excluded_by
 from .fit import base_fit, fit_effect
@@ -279,8 +282,10 @@ def _summary(held: dict) -> dict:
     return {k: held[k] for k in HELDOUT_KEYS}
 
 
-#: held-out replicates every candidate gets before the race drops those that cannot be chosen
-RACE_REPLICATES = 4
+#: held-out replicates after which the race drops the candidates that cannot be chosen (then the full count):
+#: every candidate gets the first stage's; dropping at 8 too saves a third of the replicates of a candidate
+#: that 4 replicates left within reach (their SE is wide) and 8 do not
+RACE_STAGES = (4, 8)
 #: a candidate leaves the race when its gain is this many combined SEs behind the leader's, or this many of
 #: its own SEs below :data:`attribution.MIN_GAIN`
 RACE_Z = 5.0
@@ -335,7 +340,7 @@ def error_grew(held: dict, cur: dict, tolerance: float) -> str | None:
 
 class HeldOut:
     """The held-out simulations of one model, replicate by replicate (a candidate can leave the race
-    after :data:`RACE_REPLICATES` and the others go on): pixel-marginal counts, the structured KL's
+    after a stage of :data:`RACE_STAGES` and the others go on): pixel-marginal counts, the structured KL's
     histograms, the diagnostics of every replicate and the first replicates' values for the figures.
     Replicate ``r`` is drawn from the stream ``(seed, iso, 2, 0, r)`` whatever the model (common random
     numbers), so the result is the same bytes whatever the thread count."""
@@ -344,18 +349,13 @@ class HeldOut:
         g = loop.g
         self.loop, self.model, self.diagnostics, self.label = loop, model, tuple(diagnostics), label
         self.specs = g.specs(model, g.held)
-        real_f = noise_frames(g.held, [f for _, f, _ in g.held], self.specs, model)
-        real = np.concatenate([x.ravel() for x in real_f])
-        self.n_real = real.size
-        self.real_thin = _thin(real)  # (the object stays alive as the current model's: no full copies kept)
-        self.n_counts = np.histogram(real, KL_EDGES)[0]
-        del real
+        self.n_real, self.real_thin, self.n_counts, st = loop.data_side(model, self.specs)
         self.m_counts = np.zeros_like(self.n_counts)
         self.m_size = 0
         self.plot: list[np.ndarray] = []  # the first replicates' values, up to twice the data's count
         self.plot_size = 0
         self.model_thin = None
-        self.st = StructuredKL(real_f, [sp.fixed_in_clean for sp in self.specs])
+        self.st = st.fresh()
         self.sims: dict[str, list] = {name: [] for name in self.diagnostics}
         self.done = 0
 
@@ -364,7 +364,9 @@ class HeldOut:
         g, model, specs = self.loop.g, self.model, self.specs
         sims = simulate_capture(model, specs, self.loop._rng(2, 0, r))
         nf = noise_frames(g.held, sims, specs, model)
-        counts = sum(np.histogram(x, KL_EDGES)[0] for x in nf)
+        counts = np.zeros(KL_EDGES.size - 1, np.int64)
+        for x in nf:
+            hist_uniform(x, KL_EDGES, out=counts)
         size = sum(x.size for x in nf)
         # each replicate holds as many values as the data: the first two fill the figures' sample
         plot = np.concatenate([x.ravel() for x in nf]) if r < 2 else None
@@ -423,7 +425,30 @@ class Loop:
         self.held_stats = dg.compute_all(group.held_data)
         self.applicable = [k for k, v in self.data_stats.items() if v is not None]
         self._floors: dict[str, float] = {}
+        self._data_sides: dict[bytes, tuple] = {}  # digest of the held-out clean levels -> HeldOut's data side
         self.threads = _threads(cfg)
+
+    def data_side(self, model: LoopModel, specs) -> tuple:
+        """The held-out data's side of :class:`HeldOut` under ``model`` (value count, thinned values, pooled
+        histogram, :class:`StructuredKL` of the residuals), computed once per distinct set of residuals:
+        they depend on the model only through each sequence's clean level (``dsnu``, ``prnu``, ``column_fpn``
+        and most other candidates leave it as it is), and building them is serial work (about a second per
+        candidate on the 12 MP benchmark set) while the replicates run on every core."""
+        h = hashlib.blake2b(digest_size=16)
+        h.update(np.asarray([model.full_scale_dn], np.float64).tobytes())
+        h.update(np.ascontiguousarray(model.black_dn, np.float64).tobytes())
+        h.update(np.ascontiguousarray(model.black_offset_dn(), np.float64).tobytes())
+        for sp in specs:
+            h.update(b"F" if sp.fixed_in_clean else np.ascontiguousarray(sp.signal_dn, np.float64).tobytes())
+        key = h.digest()
+        if key not in self._data_sides:
+            g = self.g
+            real_f = noise_frames(g.held, [f for _, f, _ in g.held], specs, model)
+            real = np.concatenate([x.ravel() for x in real_f])
+            # (the thinned values stay alive with the current model: no full copies kept)
+            self._data_sides[key] = (real.size, _thin(real), hist_uniform(real, KL_EDGES),
+                                     StructuredKL(real_f, [sp.fixed_in_clean for sp in specs]))
+        return self._data_sides[key]
 
     def held_floor(self, name: str) -> float:
         """The resolution of diagnostic ``name`` on the held-out data (:func:`diagnostics.resolution`)."""
@@ -516,39 +541,42 @@ class Loop:
         """``rec`` gets the held-out comparison of ``run``'s replicates with the current model's same ones."""
         n = run.done
         cur = {k: v[:n] for k, v in held_cur["sims"].items()}
-        cmp = compare(self.held_stats, self._floor_map(), cur, run.sims)
+        cmp = compare(self.held_stats, self._floor_map(), cur, run.sims, held_cur.setdefault("_scores", {}))
         rec.update({"heldout_gain": cmp.gain, "heldout_gain_sd": cmp.sd, "statistics_compared": cmp.diagnostics,
                     "moved_most": [{"diagnostic": k, "gain": g} for k, g in cmp.top()], "replicates": n,
                     "_beats": cmp.beats()})
 
     def _race(self, fitted: list, held_cur: dict) -> list:
-        """Score every fitted candidate (record, model) on the held-out frames: all get
-        :data:`RACE_REPLICATES` replicates, those that can still be chosen get the rest (a candidate
-        leaves when its gain is :data:`RACE_Z` combined SEs behind the leader's, beyond the window in which
-        candidates count as tied, or :data:`RACE_Z` SEs below :data:`attribution.MIN_GAIN`). Returns
-        (record, model, held-out dict) per candidate."""
+        """Score every fitted candidate (record, model) on the held-out frames in stages of
+        :data:`RACE_STAGES` replicates, then the full count: after each stage a candidate leaves when its
+        gain is :data:`RACE_Z` combined SEs behind the leader's (beyond the window in which candidates count
+        as tied), or :data:`RACE_Z` SEs below :data:`attribution.MIN_GAIN`; those still in get the next
+        stage's replicates. Within a stage every candidate is scored on the same replicates (the leader's
+        gain is that of the stage, not of more replicates: a gain from fewer replicates, with a wider
+        predictive law, falls short of a full-replicate one, and a tied hot-pixel candidate once left
+        "71 nats behind"). Returns (record, model, held-out dict) per candidate."""
         R = self.cfg.heldout_replicates
-        first = min(RACE_REPLICATES, R)
+        stages = sorted({min(s, R) for s in RACE_STAGES} | {R})
         runs = []
         for rec, cand in fitted:
-            run = HeldOut(self, cand, tuple(self.applicable), f"+ {rec['effect']}").extend(first)
+            run = HeldOut(self, cand, tuple(self.applicable), f"+ {rec['effect']}").extend(stages[0])
             self._score(rec, run, held_cur)
             runs.append((rec, cand, run))
-        if first < R and runs:  # (no candidate could be fitted: nothing to race)
-            # the leader's stage-one score, kept: the leader is scored again on all replicates within this loop
-            # (a candidate after it was compared with its full-replicate gain, which the 4-replicate gains,
-            # from wider predictive laws, fall well short of: a tied hot-pixel candidate left 71 nats behind)
-            lead = max(runs, key=lambda t: t[0]["heldout_gain"])[0]
-            lead_effect, lead_gain, lead_sd = lead["effect"], lead["heldout_gain"], lead["heldout_gain_sd"]
-            for rec, _cand, run in runs:
-                behind = lead_gain - rec["heldout_gain"]
-                # (an SE from 4 replicate pairs can come out near 0 by chance: at least RACE_SE_FLOOR nats)
-                if behind > RACE_Z * max(np.hypot(lead_sd, rec["heldout_gain_sd"]), RACE_SE_FLOOR):
-                    rec["left_race"] = f"{behind:.3g} nats behind {lead_effect} after {first} replicates"
+        for k, n in enumerate(stages):
+            racing = [t for t in runs if "left_race" not in t[0]]
+            if k:
+                for rec, _cand, run in racing:
+                    self._score(rec, run.extend(n), held_cur)
+            if n == R or not racing:
+                break
+            lead = max(racing, key=lambda t: t[0]["heldout_gain"])[0]
+            for rec, _cand, _run in racing:
+                behind = lead["heldout_gain"] - rec["heldout_gain"]
+                # (an SE from a few replicate pairs can come out near 0 by chance: at least RACE_SE_FLOOR nats)
+                if behind > RACE_Z * max(np.hypot(lead["heldout_gain_sd"], rec["heldout_gain_sd"]), RACE_SE_FLOOR):
+                    rec["left_race"] = f"{behind:.3g} nats behind {lead['effect']} after {n} replicates"
                 elif rec["heldout_gain"] + RACE_Z * max(rec["heldout_gain_sd"], RACE_SE_FLOOR) < MIN_GAIN:
-                    rec["left_race"] = f"gain below {MIN_GAIN:g} nats by > {RACE_Z:g} SE after {first} replicates"
-                else:
-                    self._score(rec, run.extend(R), held_cur)
+                    rec["left_race"] = f"gain below {MIN_GAIN:g} nats by > {RACE_Z:g} SE after {n} replicates"
         for rec, _cand, run in runs:
             # a gain short of GAIN_Z SEs but beyond UNCERTAIN_Z: the replicates are doubled for it and for the
             # current model, and the comparison is made again (the jackknife SE of 12 pairs is itself noisy)

@@ -45,12 +45,14 @@ def _insert(buf, k, x):
 
 
 @njit(cache=True, nogil=True)
-def _split(v, min_level):
-    """``v``: (pixels, n) C-contiguous, one pixel's series per row."""
+def _split(v, min_levels):
+    """``v``: (pixels, n) C-contiguous, one pixel's series per row; the best split for each least level
+    size in ``min_levels`` (one sort per pixel for all of them). Returns (L, pixels) arrays."""
     m, n = v.shape
-    best_w = np.full(m, np.inf)
-    gap = np.zeros(m)
-    high = np.zeros(m, np.int64)
+    nl = min_levels.size
+    best_w = np.full((nl, m), np.inf)
+    gap = np.zeros((nl, m))
+    high = np.zeros((nl, m), np.int64)
     s = np.empty(n)
     cs = np.empty(n)
     cs2 = np.empty(n)
@@ -65,14 +67,15 @@ def _split(v, min_level):
             cs[i] = a
             cs2[i] = a2
         tot, tot2 = cs[n - 1], cs2[n - 1]
-        for k in range(min_level, n - min_level + 1):
+        for k in range(1, n):
             a, a2 = cs[k - 1], cs2[k - 1]
             b, b2 = tot - a, tot2 - a2
             w = (a2 - a * a / k) + (b2 - b * b / (n - k))
-            if w < best_w[j]:
-                best_w[j] = w
-                gap[j] = b / (n - k) - a / k
-                high[j] = n - k
+            for q in range(nl):
+                if min_levels[q] <= k <= n - min_levels[q] and w < best_w[q, j]:
+                    best_w[q, j] = w
+                    gap[q, j] = b / (n - k) - a / k
+                    high[q, j] = n - k
     return best_w, gap, high
 
 
@@ -105,9 +108,19 @@ def two_level_split(v: np.ndarray, sigma2: float, min_level: int = 2, gap_sigma:
     Two-level: the gap is >= ``gap_sigma`` x sqrt(``sigma2``) and the pooled within-level variance
     <= ``level_var`` x ``sigma2`` (a pixel with a wide unimodal spread, such as a hot
     pixel's dark-charge shot noise, has a gap too, but wide levels; one heavy-tailed outlier is one frame)."""
+    return two_level_splits(v, sigma2, [(min_level, gap_sigma, level_var)])[0]
+
+
+def two_level_splits(v: np.ndarray, sigma2: float, rules) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """:func:`two_level_split` for several ``(min_level, gap_sigma, level_var)`` rules at once (each
+    pixel's series sorted once for all of them)."""
     v = np.asarray(v, dtype=np.float64)
     shape = v.shape[1:]
     n = v.shape[0]
-    best_w, gap, high = _split(np.ascontiguousarray(v.reshape(n, -1).T), int(min_level))
-    mask = (gap >= gap_sigma * np.sqrt(sigma2)) & (best_w / max(n - 2, 1) <= level_var * sigma2)
-    return mask.reshape(shape), gap.reshape(shape), high.reshape(shape)
+    levels = np.array([int(r[0]) for r in rules], np.int64)
+    best_w, gap, high = _split(np.ascontiguousarray(v.reshape(n, -1).T), levels)
+    out = []
+    for q, (_lvl, gap_sigma, level_var) in enumerate(rules):
+        mask = (gap[q] >= gap_sigma * np.sqrt(sigma2)) & (best_w[q] / max(n - 2, 1) <= level_var * sigma2)
+        out.append((mask.reshape(shape), gap[q].reshape(shape), high[q].reshape(shape)))
+    return out

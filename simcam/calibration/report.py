@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ProfileError
+from ..parallel import map_threads
 from . import diagnostics as dg
 from .effects import DIAGNOSTIC_EFFECT, card_for
 from .effects.card import format_number as _num
@@ -294,16 +295,17 @@ def figures(r: GroupResult, seed: int = 0) -> dict[str, str]:
         fig.tight_layout()
         out["ptc"] = _png(fig)
     # spectra: data vs base vs final (mean of 4 simulated captures)
-    model_ps = {}
-    for key, model in (("base", r.base), ("final", r.model)):
+    def spectra(item):
+        key, model, rep = item
         specs = g.specs(model, g.fit)
-        acc = {2: [], 1: []}
-        for rep in range(4):
-            sims = simulate_capture(model, specs, np.random.default_rng([seed, 99, rep]))
-            cd = d.like(sims, specs)
-            for axis in (2, 1):
-                acc[axis].append(dg.periodogram(cd, axis))
-        model_ps[key] = acc
+        cd = d.like(simulate_capture(model, specs, np.random.default_rng([seed, 99, rep])), specs)
+        return key, {axis: dg.periodogram(cd, axis) for axis in (2, 1)}
+
+    model_ps = {"base": {2: [], 1: []}, "final": {2: [], 1: []}}
+    items = [(key, model, rep) for key, model in (("base", r.base), ("final", r.model)) for rep in range(4)]
+    for key, ps in map_threads(spectra, items):  # (each capture seeded by its index: any thread count)
+        for axis in (2, 1):
+            model_ps[key][axis].append(ps[axis])
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.6))
     for ax, axis, title in ((axes[0], 2, "row means (vs row index)"), (axes[1], 1, "column means (vs column index)")):
         p = dg.periodogram(d, axis)

@@ -2,7 +2,7 @@
 (``Loop._broken``): the decision rule on hand-made discrepancies (p-values from their definition).
 A candidate that makes the held-out structured KL or its pixel family grow is refused (``error_grew``),
 tied candidates go to the one the strongest residual proposed (``Loop._break_tie``), and the race
-compares with the leader's first-stage gain (``Loop._race``): the rules on the figures of the capture
+compares within each stage of replicates (``Loop._race``): the rules on the figures of the capture
 sets that set them."""
 
 from types import SimpleNamespace
@@ -99,11 +99,11 @@ def test_tied_candidates_go_to_the_one_the_strongest_residual_proposed():
     assert Loop._break_tie(SimpleNamespace(preferred=set()), dead, [dead, hot], sig) is dead
 
 
-def test_the_race_compares_with_the_leaders_first_stage_gain(monkeypatch):
-    """A candidate leaves the race when it is far behind the leader after the first replicates, judged on
-    the leader's first-stage gain even when the leader, first in the list, has meanwhile been scored on
-    all replicates (4-replicate gains fall well short of 12-replicate ones: a stuck-pixel and a hot-pixel
-    candidate at 115 nats each after 4 replicates, 186 and 185 after 12)."""
+def test_the_race_compares_within_each_stage(monkeypatch):
+    """A candidate leaves the race when it is far behind the leader after a stage of replicates (4, then
+    8), judged on the leader's gain from the same stage even when the leader, first in the list, has
+    meanwhile been scored on more replicates (4-replicate gains fall well short of 12-replicate ones: a
+    stuck-pixel and a hot-pixel candidate at 115 nats each after 4 replicates, 186 and 185 after 12)."""
     import simcam.calibration.loop as loop_mod
 
     class Run:  # a candidate's held-out replicates: its gain after n of them is model[n]
@@ -125,9 +125,13 @@ def test_the_race_compares_with_the_leaders_first_stage_gain(monkeypatch):
     monkeypatch.setattr(Loop, "_broken", lambda self, held, cur: [])
     loop = SimpleNamespace(cfg=LoopConfig(heldout_replicates=12), applicable=[], _score=lambda *a: score(None, *a),
                            _broken=lambda *a: [])
-    dead, hot, tail = {4: 115.1, 12: 185.7}, {4: 114.8, 12: 184.6}, {4: 15.0, 12: 19.0}
-    fitted = [({"effect": "dead_pixels"}, dead), ({"effect": "hot_pixels"}, hot), ({"effect": "heavy_tail_read"}, tail)]
+    dead, hot, tail = {4: 115.1, 8: 160.0, 12: 185.7}, {4: 114.8, 8: 158.9, 12: 184.6}, {4: 15.0, 8: 17.0, 12: 19.0}
+    dsnu = {4: 112.0, 8: 140.0, 12: 150.0}  # within reach after 4 replicates, not after 8
+    fitted = [({"effect": "dead_pixels"}, dead), ({"effect": "hot_pixels"}, hot), ({"effect": "heavy_tail_read"}, tail),
+              ({"effect": "dsnu"}, dsnu)]
     out = Loop._race(loop, fitted, {"structured": {}, "kl_structured": 0.0, "kl_structured_sd": 0.0, "kl": 0.0})
     recs = {r["effect"]: r for r, _m, _h in out}
     assert "left_race" not in recs["hot_pixels"] and recs["hot_pixels"]["replicates"] == 12
     assert recs["heavy_tail_read"]["left_race"] == "100 nats behind dead_pixels after 4 replicates"
+    assert recs["dsnu"]["left_race"] == "20 nats behind dead_pixels after 8 replicates"
+    assert recs["dsnu"]["replicates"] == 8 and recs["heavy_tail_read"]["replicates"] == 4

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from simcam.calibration.pixelwise import temporal_median, two_level_split
+from simcam.calibration.pixelwise import temporal_median, two_level_split, two_level_splits
 
 
 @pytest.mark.parametrize("n", [2, 3, 8, 15, 16])
@@ -43,3 +43,16 @@ def test_two_level_split_finds_telegraph_pixels():
     # pixels that did switch (>= 2 frames on each level) are found; white-noise pixels are not
     switched = tele & (np.sum(v > 4.5, axis=0) >= 2) & (np.sum(v > 4.5, axis=0) <= 14)
     assert mask[switched].mean() > 0.95 and mask[~tele].mean() < 0.001
+
+
+def test_several_rules_at_once_match_each_rule_alone():
+    """One sort per pixel for two rules (the strict telegraph rule and the looser one that keeps telegraph
+    pixels out of the hot ones): each result is the numpy closed form of its own rule."""
+    rng = np.random.default_rng(6)
+    v = rng.normal(0, 1, (16, 3000))
+    tele = rng.random(3000) < 0.2
+    v[:, tele] += 6.0 * (rng.random((16, tele.sum())) < 0.1)  # many pixels with a single frame up
+    strict, loose = two_level_splits(v, 1.0, [(2, 5.0, 2.0), (1, 4.0, 3.0)])
+    for got, want in ((strict, _two_level_numpy(v, 1.0)), (loose, _two_level_numpy(v, 1.0, 1, 4.0, 3.0))):
+        assert np.array_equal(got[0], want[0]) and np.allclose(got[1], want[1]) and np.array_equal(got[2], want[2])
+    assert loose[0].sum() > strict[0].sum()  # the single-frame pixels only count for the loose rule

@@ -45,6 +45,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import diagnostics as dg
+from ..pixelwise import two_level_split
 from .card import EffectCard, EffectParams, ProfileTerm, quantity
 
 #: synthetic two-level pixels the detection's efficiency and biases are measured on
@@ -68,11 +69,11 @@ def detection(amplitude_dn: float, log_sigma: float, p_high: float, n: int, sigm
     """(detected share, mean gap (DN) of the detected, standard deviation of their log gaps, mean share
     of their frames on the high level) of ``m`` synthetic telegraph pixels (log-normal steps of mean
     ``amplitude_dn``, high with probability ``p_high``, ``n`` frames, Gaussian read noise of variance
-    ``sigma2``) under :func:`simcam.calibration.diagnostics.two_level_split`."""
+    ``sigma2``) under :func:`simcam.calibration.pixelwise.two_level_split`."""
     s = float(log_sigma)
     amp = amplitude_dn * np.exp(s * rng.standard_normal(m) - s * s / 2)
     v = np.sqrt(sigma2) * rng.standard_normal((n, m)) + amp * (rng.random((n, m)) < p_high)
-    mask, gap, high = dg.two_level_split(v, sigma2)
+    mask, gap, high = two_level_split(v, sigma2)
     if not mask.any():
         return 0.0, float("nan"), float("nan"), float("nan")
     return (float(mask.mean()), float(gap[mask].mean()), float(np.std(np.log(gap[mask]))),

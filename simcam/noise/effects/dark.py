@@ -23,6 +23,7 @@ import numpy as np
 from pydantic import Field
 
 from ...errors import NoiseModelError
+from ..kernels.poisson import poisson_table_f32
 from .base import Effect, EffectContext, per_block, register_effect
 
 
@@ -35,13 +36,16 @@ def exposure_of(ctx: EffectContext, effect: str) -> float:
 
 
 def _add_poisson_electrons(x: np.ndarray, lam: np.ndarray, electron: float, ctx: EffectContext) -> None:
-    """x += electron * Poisson(lam), drawn row block by row block (independent of tiling)."""
+    """x += electron * Poisson(lam), drawn row block by row block (independent of tiling), by the exact
+    table sampler of :mod:`simcam.noise.kernels.poisson` (twice numpy's ``Generator.poisson`` on the
+    small means of dark frames)."""
     row = [0]
+    e = np.float32(electron)
 
     def add(rows, rng):
         r0 = row[0]
         n = rows.shape[0]
-        rows += (np.float32(electron) * rng.poisson(lam[r0:r0 + n])).astype(np.float32)
+        rows += e * poisson_table_f32(rng, lam[r0:r0 + n])
         row[0] += n
 
     per_block(x, ctx, add)
