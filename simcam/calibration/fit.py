@@ -71,18 +71,21 @@ def _scene_ptc(d: dg.CaptureData) -> tuple[float, float]:
     return float(K), float(max(v0, 0.1))
 
 
-def _split(fitted: EffectParams | Fit) -> tuple[EffectParams, float | None]:
-    return (fitted.params, fitted.K) if isinstance(fitted, Fit) else (fitted, None)
+def _split(fitted: EffectParams | Fit) -> tuple[EffectParams, float | None, float | None]:
+    return (fitted.params, fitted.K, fitted.read_dn) if isinstance(fitted, Fit) else (fitted, None, None)
 
 
 def fit_effect(effect: str, d: dg.CaptureData, model: LoopModel, ctx: FitContext) -> LoopModel:
     """The model with ``effect`` added (parameters fitted on ``d`` by its card; a card that re-estimates
     the system gain sets K) and the read noise refitted; effects whose estimate depends on the rest of
     the model (``refit_on_change``), or on ``effect`` (``refit_after``), are fitted again."""
-    params, newK = _split(card_for(effect).fit(d, model, ctx))
+    params, newK, read = _split(card_for(effect).fit(d, model, ctx))
     m = model.with_effect(effect, params)
     if newK is not None:
         m.K = newK
+    if read is not None:  # the card measured the read noise itself: the dark variance it implies
+        m.read_dn = float(read)
+        m.set_dark_variance_from_read()
     for other in CARDS.values():
         if (other.refit_on_change or effect in other.refit_after) and other.name in m.effects and other.name != effect:
             m.effects[other.name] = _split(other.fit(d, m, ctx))[0]

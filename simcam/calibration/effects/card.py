@@ -132,18 +132,22 @@ class EffectParams(Mapping):
 
 @dataclass(frozen=True)
 class Fit:
-    """A fit that also re-estimates the system gain K (DN/e-) with the effect's parameters.
+    """A fit that also re-estimates the system gain K (DN/e-), or the read noise, with the effect's
+    parameters.
 
     Parameters
     ----------
     params : EffectParams
         The fitted parameters.
-    K : float
-        The system gain re-estimated with them (DN/e-).
+    K : float, optional
+        The system gain re-estimated with them (DN/e-); None: unchanged.
+    read_dn : float, optional
+        The read noise re-estimated with them (DN, before the ADC); None: the model's bookkeeping
+        (measured dark variance less the modelled terms, :meth:`LoopModel.refit_read`).
 
     Attributes
     ----------
-    params, K
+    params, K, read_dn
         As the parameters.
 
     Examples
@@ -155,7 +159,8 @@ class Fit:
     """
 
     params: EffectParams
-    K: float
+    K: float | None = None
+    read_dn: float | None = None
 
 
 @dataclass(frozen=True)
