@@ -14,7 +14,8 @@ Measured (shared 2-core machine, load average 2.3-4.5): 0.2 MP 148 s / 1.04 GB, 
 model comparison. With it (candidates race, replicates on 2 threads, 12 held-out replicates, 448 x 448
 budget, a second look for uncertain candidates): 12 MP 458 s / 2.54 GB, load average 1.6 (docs/loop.md
 has the steps); session 8: 583 s / 2.53 GB; session 9: 438 s / 2.52 GB with the ISO-100 group stopping
-two iterations early (docs/loop.md).
+two iterations early; session 10: 662 s / 2.51 GB; session 11: 453 s / 2.49 GB with session 10's results
+(docs/loop.md).
 
 Usage::
 
@@ -33,6 +34,9 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/machine.py
+from machine import cpu_model  # noqa: E402
 
 SHAPES = {"0.2": (384, 512), "1": (864, 1152), "3": (1536, 2048), "12": (3000, 4000)}
 ISOS = {100: 0.5, 800: 4.0, 3200: 16.0}  # ISO -> K (DN / e-)
@@ -90,6 +94,7 @@ def main() -> None:
     ap.add_argument("--sizes", nargs="+", default=["0.2", "1", "3", "12"], choices=list(SHAPES))
     ap.add_argument("--work", type=Path, default=Path("/tmp/simcam-loop-bench"))
     args = ap.parse_args()
+    print(f"CPU: {cpu_model()}, {os.cpu_count()} cores; SIMCAM_LOOP_THREADS={os.environ.get('SIMCAM_LOOP_THREADS', '')!r}")
     print("| set | frame | wall (s) | peak RSS (GB) | load avg |")
     print("|---|---|---|---|---|")
     for size in args.sizes:
