@@ -708,7 +708,8 @@ def hot_pixel_mask(d: CaptureData) -> np.ndarray | None:
     both that map and the temporal-*median* map (row/column profiles removed). A hot pixel is high
     in every frame; a heavy-tailed read-noise outlier lifts one frame, which moves the mean but
     not the median. A pixel whose dark frames sit on two tight levels (a telegraph pixel,
-    :func:`telegraph_split`, even one on its low level in one frame only) is not a hot one.
+    :func:`telegraph_split`, even one on its low level in one frame only) is not a hot one, nor is
+    a stuck one (:func:`constant_pixels`: the same code in every dark and flat frame).
     (The threshold comes from the mean map: the median of a few coarsely quantised frames sits on so
     few codes that its own robust spread can collapse to 0.)"""
     if "hotmask" not in d.cache:
@@ -719,7 +720,7 @@ def hot_pixel_mask(d: CaptureData) -> np.ndarray | None:
             r_mean = remove_profiles(dm[0])
             thr = 6 * robust_sigma(r_mean)
             r_med = remove_profiles(temporal_median(np.concatenate(d.darks)))
-            d.cache["hotmask"] = (r_mean > thr) & (r_med > thr) & ~_telegraph_mask(d)
+            d.cache["hotmask"] = (r_mean > thr) & (r_med > thr) & ~_telegraph_mask(d) & ~constant_pixels(d)
     return d.cache["hotmask"]
 
 
@@ -731,7 +732,7 @@ def defect_masks(d: CaptureData) -> tuple[np.ndarray, np.ndarray] | None:
     """(dead, stuck) pixel masks of the flat of :meth:`CaptureData.flat_map` (EMVA 1288 Release 4.0
     sec. 8.5, defect pixels; A. Abdelhamed, *Noise Modelling for Smartphone Cameras*, PhD dissertation,
     York University, 2020, ch. 2, defective pixels): *stuck* pixels read the same code in every frame
-    of the flat; *dead* pixels (not stuck) respond with less than :data:`DEAD_RESPONSE` of their CFA
+    of the flat and of the darks; *dead* pixels (not stuck) respond with less than :data:`DEAD_RESPONSE` of their CFA
     plane's median signal (flat mean map minus the dark mean map, or minus the declared black).
     A hot pixel still responds to light, so it is neither."""
     if "defects" in d.cache:
@@ -762,9 +763,49 @@ def defect_masks(d: CaptureData) -> tuple[np.ndarray, np.ndarray] | None:
             raise NotApplicable("the flat's signal above the dark level is under 20 x the noise of its mean "
                                 "map (or 1 DN): a pixel without photo-response is not told apart")
         dead[dy::step, dx::step] = r < DEAD_RESPONSE * med
-    stuck = np.all(f == f[:1], axis=0)
+    # stuck: one code in every frame of the flat and of the darks (a hot pixel clipping at white in the
+    # flat still moves in the darks)
+    darks = [a for a in d.darks if a.shape[0]]
+    stuck = _same_code([f] + darks)
     d.cache["defects"] = (dead & ~stuck, stuck)
     return d.cache["defects"]
+
+
+def _same_code(seqs) -> np.ndarray:
+    """Pixels reading the code of the first frame in every frame of ``seqs`` (non-empty)."""
+    ref = seqs[0][0]
+    same = np.ones(ref.shape, bool)
+    for a in seqs:
+        for frame in a:
+            same &= frame == ref
+    return same
+
+
+def constant_pixels(d: CaptureData) -> np.ndarray:
+    """Pixels that read one code in every frame of every dark and every flat sequence: stuck pixels,
+    whatever the exposure time and the light (a shorted node). A hot pixel is not one: its signal grows
+    with the exposure time and carries the read noise and its dark electrons' shot noise; nor is a hot
+    pixel that clips at white in a flat only. No pixel without both darks and flats (a pixel constant
+    over darks alone may be a hot one under a coarse quantiser)."""
+    if "constant" not in d.cache:
+        darks = [a for a in d.darks if a.shape[0]]
+        flats = [a for a in d.flats if a.shape[0]]
+        if darks and flats:
+            d.cache["constant"] = _same_code(darks + flats)
+        else:
+            d.cache["constant"] = np.zeros((darks or flats)[0].shape[1:] if darks or flats else (0, 0), bool)
+    return d.cache["constant"]
+
+
+def clipped_constant_pixels(d: CaptureData) -> np.ndarray:
+    """The :func:`constant_pixels` that read white (the clip code) in every frame: stuck at white, or hot
+    pixels whose dark signal alone reaches white at this gain even in the shortest dark (from one ISO's
+    frames the two look alike; the loop fits both and lets the held-out frames choose)."""
+    c = constant_pixels(d)
+    if not c.any():
+        return c
+    ref = (d.darks[0] if d.darks and d.darks[0].shape[0] else d.flats[0])[0]
+    return c & (ref >= np.float32(d.white_dn - 0.5))
 
 
 def defect_pixels(d: CaptureData):
@@ -805,14 +846,15 @@ def telegraph_split(d: CaptureData) -> tuple[np.ndarray, np.ndarray, np.ndarray,
     return d.cache["telegraph"]
 
 
-def _telegraph_mask(d: CaptureData) -> np.ndarray | bool:
+def _telegraph_mask(d: CaptureData) -> np.ndarray | np.bool_:
     """The pixels of :func:`telegraph_split` that are two-level with one frame on a level allowed (a
-    telegraph pixel low in only one frame is not a hot pixel), or False where it is not defined."""
+    telegraph pixel low in only one frame is not a hot pixel), or ``np.False_`` where it is not defined
+    (numpy's: ``~`` of Python's False is -1, which turned the hot-pixel mask into an integer index)."""
     try:
         t = telegraph_split(d)
     except NotApplicable:
-        return False
-    return False if t is None else t[5]
+        return np.False_
+    return np.False_ if t is None else t[5]
 
 
 def telegraph_pixels(d: CaptureData):

@@ -370,7 +370,7 @@ def fixed_arrays(effect, fixed: dict[str, Any], shape: tuple[int, int]) -> dict[
         read_mask = np.zeros(h * w, bool)
         (read_mask if effect.needs_read else mask)[fixed["dead"]] = True
         mask[fixed["stuck"]] = True
-        val[fixed["stuck"]] = np.float32(effect.stuck_value)
+        val[fixed["stuck"]] = fixed.get("stuck_value", np.float32(effect.stuck_value))
         return {"set_mask": mask.reshape(1, h, w), "set_value": val.reshape(1, h, w),
                 "read_mask": read_mask.reshape(1, h, w)}
     if t == "rtn":

@@ -35,6 +35,12 @@ by the moments of the rates, their noise variance taken off) and the offsets bec
 t = 0 (same moments). Otherwise, and at one exposure time, the offset is the signal in the pooled
 dark mean map as above.
 
+Stuck pixels (the same code in every dark and flat frame, ``diagnostics.constant_pixels``) are not hot
+ones: they carry no dark signal that grows with time and no temporal noise (``dead_pixels`` models
+them). Those reading white, though, may be hot pixels whose offset alone clips at white at this gain
+even in the shortest dark: the card is also fitted in the form ``clipped``, with them among the hot
+pixels, and the held-out frames choose between the two forms (and ``dead_pixels``).
+
 Profile. ``{type: hot_pixels, hot_fraction, hot_offset, hot_log_sigma}``: the same log-normal, as
 its mean ``hot_offset = exp(log_mean + log_sigma^2 / 2) / (white - black)`` on normalised raw and
 ``hot_log_sigma = log_sigma``; reading it back inverts this exactly (the count is not kept). With
@@ -68,10 +74,20 @@ class HotPixels(EffectParams):
 
 class HotPixelsCard(EffectCard, name="hot_pixels", params=HotPixels, null_field="fraction", diagnostics=("hot_pixel_tail",),
                     fixed_pattern=True, gaussian=False):
+    def variants(self, proposed_by):
+        # the pixels reading white in every dark and flat frame are stuck ones or hot ones clipped at white
+        # (diagnostics.clipped_constant_pixels): fitted without them and, as the form "clipped", with them
+        return [proposed_by[0], (proposed_by[0], "clipped")]
+
     def fit(self, d, model, ctx):
         m, _vt, _n = d.dark_map()
         r = dg.remove_profiles(m)
         hot = dg.hot_pixel_mask(d)  # persistent outliers (temporal median), offsets from the mean map
+        clipped = None
+        if ctx.form == "clipped":
+            clipped = dg.clipped_constant_pixels(d)
+            if not clipped.any():  # nothing at white: the same fit as the other form
+                return HotPixels(fraction=0.0, log_mean=0.0, log_sigma=0.05, count=0)
         if not hot.any():  # fewer persistent outliers than the model's (none here): nothing to add
             return HotPixels(fraction=0.0, log_mean=0.0, log_sigma=0.05, count=0)
         vals = r[hot]
@@ -83,7 +99,12 @@ class HotPixelsCard(EffectCard, name="hot_pixels", params=HotPixels, null_field=
         lines = _offset_and_rate(d, hot)
         if lines is not None:  # a local dark current: intercept + rate x exposure
             (log_mean, log_sigma), (rate, rate_ls) = lines
-        return HotPixels(fraction=float(hot.mean()), log_mean=log_mean, log_sigma=log_sigma, count=int(hot.sum()),
+        count = int(hot.sum())
+        if clipped is not None:  # the clipped ones: offsets beyond white, a censored log-normal sample
+            n_c = int(clipped.sum())
+            log_mean, log_sigma = censored_lognormal(log_mean, log_sigma, count, float(np.log(np.median(r[clipped]))), n_c)
+            count += n_c
+        return HotPixels(fraction=count / hot.size, log_mean=log_mean, log_sigma=log_sigma, count=count,
                          shot_noise=True if shot else None, gain_dn_per_e=K if shot else None,
                          rate_dn_per_s=rate, rate_log_sigma=rate_ls)
 
@@ -107,6 +128,25 @@ class HotPixelsCard(EffectCard, name="hot_pixels", params=HotPixels, null_field=
                          gain_dn_per_e=float(e) * full_scale_dn if e else None,
                          rate_dn_per_s=float(entry["hot_rate"]) * full_scale_dn if entry.get("hot_rate") else None,
                          rate_log_sigma=float(entry.get("hot_rate_log_sigma", 0.0)) if entry.get("hot_rate") else None)
+
+
+def censored_lognormal(m0: float, s0: float, n0: int, log_c: float, n_c: int) -> tuple[float, float]:
+    """(log mean, log sigma) of the log-normal by maximum likelihood from ``n0`` observed offsets whose logs
+    have mean ``m0`` and SD ``s0`` and ``n_c`` offsets known only to exceed ``exp(log_c)`` (clipped at white):
+    the censored-normal likelihood in log space (a Tobit model; J. Tobin, *Econometrica* 26, 1958),
+    ``-n0 log s - n0 (s0^2 + (m0 - mu)^2) / (2 s^2) + n_c log Q((log_c - mu) / s)``."""
+    from scipy.optimize import minimize
+    from scipy.special import log_ndtr
+
+    def nll(theta):
+        mu, s = theta[0], float(np.exp(theta[1]))
+        return -(-n0 * np.log(s) - n0 * (s0 * s0 + (m0 - mu) ** 2) / (2 * s * s) + n_c * log_ndtr((mu - log_c) / s))
+
+    start = np.array([max(m0, log_c) if n0 else log_c, np.log(max(s0, 0.3))])
+    res = minimize(nll, start, method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-9, "maxiter": 2000})
+    mu, s = float(res.x[0]), float(np.exp(res.x[1]))
+    # with no observed offset the scale is not identified: keep it from the observed ones (or 0.3)
+    return (mu, max(s, 0.05)) if n0 >= 2 else (log_c + 0.3, max(s0, 0.3))
 
 
 def _lognormal_moments(x: np.ndarray, noise_var: float) -> tuple[float, float] | None:

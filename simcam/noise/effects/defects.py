@@ -134,6 +134,11 @@ class DeadPixels(Effect):
         Share of pixels that read ``stuck_value``.
     stuck_value : float
         Normalised raw (1.0: white, saturated).
+    stuck_values : list of float, optional
+        Levels the stuck pixels read (normalised raw), e.g. a sensor's measured ones: each stuck
+        pixel reads one of them, drawn once per sensor (uniformly); replaces ``stuck_value``. Stuck
+        pixels of one sensor often sit at several levels: white, black, zero (a node shorted to
+        either rail, or held at a leakage level).
     dead_read_noise : bool
         Dead pixels keep the frame's read noise (default False: exactly black).
     """
@@ -142,7 +147,14 @@ class DeadPixels(Effect):
     dead_fraction: float = Field(0.0, ge=0, le=1)
     stuck_fraction: float = Field(0.0, ge=0, le=1)
     stuck_value: float = 1.0
+    stuck_values: list[float] | None = Field(None, min_length=1)
     dead_read_noise: bool = False
+
+    def to_entry(self):
+        out = super().to_entry()
+        if self.stuck_values is None:  # one level: the entry as before the option existed
+            out.pop("stuck_values", None)
+        return out
 
     @property
     def needs_read(self) -> bool:  # the read noise is sampled apart only when dead pixels keep it
@@ -158,7 +170,11 @@ class DeadPixels(Effect):
         u = rng.random(shape)
         dead = u < self.dead_fraction
         stuck = (u >= self.dead_fraction) & (u < self.dead_fraction + self.stuck_fraction)
-        return {"dead": np.flatnonzero(dead), "stuck": np.flatnonzero(stuck)}
+        out = {"dead": np.flatnonzero(dead), "stuck": np.flatnonzero(stuck)}
+        if self.stuck_values is not None:  # drawn after the map: the map is that of one level
+            levels = np.asarray(self.stuck_values, np.float32)
+            out["stuck_value"] = levels[rng.integers(levels.size, size=out["stuck"].size)]
+        return out
 
     def apply(self, x, ctx):
         flat = x.reshape(-1)
@@ -167,5 +183,5 @@ class DeadPixels(Effect):
             flat[dead] = ctx.read.reshape(-1)[dead]
         else:
             flat[dead] = np.float32(0.0)
-        flat[ctx.fixed["stuck"]] = np.float32(self.stuck_value)
+        flat[ctx.fixed["stuck"]] = ctx.fixed.get("stuck_value", np.float32(self.stuck_value))
         return x
