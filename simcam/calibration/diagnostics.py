@@ -772,10 +772,13 @@ def defect_masks(d: CaptureData) -> tuple[np.ndarray, np.ndarray] | None:
 
 
 def _same_code(seqs) -> np.ndarray:
-    """Pixels reading the code of the first frame in every frame of ``seqs`` (non-empty)."""
+    """Pixels reading the code of the first frame in every frame of ``seqs`` (non-empty; sequences of
+    another frame size are not compared)."""
     ref = seqs[0][0]
     same = np.ones(ref.shape, bool)
     for a in seqs:
+        if a.shape[1:] != ref.shape:
+            continue
         for frame in a:
             same &= frame == ref
     return same

@@ -56,6 +56,9 @@ EFFECT_CASES = {
     # dead pixels with no photo-response behind a working read-out (what simcam loop fits): black + read noise
     "dead_pixels_read_noise": [{"type": "dead_pixels", "dead_fraction": 0.05, "stuck_fraction": 0.02,
                                 "stuck_value": 0.8, "dead_read_noise": True}],
+    # stuck pixels at several levels (what simcam loop fits): each one's level drawn per sensor
+    "dead_pixels_levels": [{"type": "dead_pixels", "dead_fraction": 0.02, "stuck_fraction": 0.04,
+                            "stuck_values": [-0.02, 0.45, 1.0], "dead_read_noise": True}],
     "rtn": [{"type": "rtn", "fraction": 0.1, "amplitude": 0.02, "amplitude_log_sigma": 0.3, "p_high": 0.3}],
     "charge_crosstalk": [{"type": "charge_crosstalk", "coefficient": 0.08, "diagonal": 0.02}],
     "adc_dnl": [{"type": "adc_dnl", "range_dn": 200.0, "offset_dn": 16.0, "bits": 8, "dnl_sigma": 0.3}],

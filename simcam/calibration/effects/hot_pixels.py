@@ -101,6 +101,9 @@ class HotPixelsCard(EffectCard, name="hot_pixels", params=HotPixels, null_field=
             (log_mean, log_sigma), (rate, rate_ls) = lines
         count = int(hot.sum())
         if clipped is not None:  # the clipped ones: offsets beyond white, a censored log-normal sample
+            # (bound: their level in the shortest darks' mean map, as the others' offsets at one exposure
+            # time; with rates the others' are intercepts at t = 0, a rate x 1/50 s below it: a few DN of
+            # thousands)
             n_c = int(clipped.sum())
             log_mean, log_sigma = censored_lognormal(log_mean, log_sigma, count, float(np.log(np.median(r[clipped]))), n_c)
             count += n_c
