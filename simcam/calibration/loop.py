@@ -534,7 +534,8 @@ class Loop:
         cand = fit_effect(effect, self.g.fit_data, model, ctx)
         rec["parameters"] = cand.effects[effect].to_dict()
         if card.is_null(cand.effects[effect]):
-            return dict(rec, skipped=f"the fitted {effect} has zero magnitude"), None
+            return dict(rec, skipped=f"the fitted {effect} has zero magnitude" + (
+                f" (nothing for the form {form!r} to model here)" if form else "")), None
         return rec, cand
 
     def _score(self, rec: dict, run: HeldOut, held_cur: dict) -> None:

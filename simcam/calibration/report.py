@@ -673,7 +673,8 @@ def _candidates_table(iterations: list[dict]) -> str:
     for i, it in enumerate(iterations, 1):
         for c in it.get("candidates", []):
             if "skipped" in c:
-                rows.append(f"<tr><td>{i}</td><td class=l>{c['effect']}</td><td class=l>{', '.join(c['proposed_by'])}</td>"
+                name = c["effect"] + (f" ({c['form']})" if c.get("form") else "")
+                rows.append(f"<tr><td>{i}</td><td class=l>{name}</td><td class=l>{', '.join(c['proposed_by'])}</td>"
                             f"<td colspan=8 class=l>{html.escape(c['skipped'])}</td></tr>")
                 continue
             moved = ", ".join(f"{m['diagnostic']} {m['gain']:+.3g}" for m in c["moved_most"])
