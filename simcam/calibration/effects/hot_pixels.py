@@ -80,14 +80,14 @@ class HotPixelsCard(EffectCard, name="hot_pixels", params=HotPixels, null_field=
         return [proposed_by[0], (proposed_by[0], "clipped")]
 
     def fit(self, d, model, ctx):
-        m, _vt, _n = d.dark_map()
-        r = dg.remove_profiles(m)
-        hot = dg.hot_pixel_mask(d)  # persistent outliers (temporal median), offsets from the mean map
         clipped = None
         if ctx.form == "clipped":
             clipped = dg.clipped_constant_pixels(d)
             if not clipped.any():  # nothing at white: the same fit as the other form
                 return HotPixels(fraction=0.0, log_mean=0.0, log_sigma=0.05, count=0)
+        m, _vt, _n = d.dark_map()
+        r = dg.remove_profiles(m)
+        hot = dg.hot_pixel_mask(d)  # persistent outliers (temporal median), offsets from the mean map
         if not hot.any():  # fewer persistent outliers than the model's (none here): nothing to add
             return HotPixels(fraction=0.0, log_mean=0.0, log_sigma=0.05, count=0)
         vals = r[hot]
@@ -138,6 +138,8 @@ def censored_lognormal(m0: float, s0: float, n0: int, log_c: float, n_c: int) ->
     have mean ``m0`` and SD ``s0`` and ``n_c`` offsets known only to exceed ``exp(log_c)`` (clipped at white):
     the censored-normal likelihood in log space (a Tobit model; J. Tobin, *Econometrica* 26, 1958),
     ``-n0 log s - n0 (s0^2 + (m0 - mu)^2) / (2 s^2) + n_c log Q((log_c - mu) / s)``."""
+    if n0 < 2:  # with fewer than 2 observed offsets the scale is not identified: keep it (or 0.3)
+        return log_c + 0.3, max(s0, 0.3)
     from scipy.optimize import minimize
     from scipy.special import log_ndtr
 
@@ -145,11 +147,9 @@ def censored_lognormal(m0: float, s0: float, n0: int, log_c: float, n_c: int) ->
         mu, s = theta[0], float(np.exp(theta[1]))
         return -(-n0 * np.log(s) - n0 * (s0 * s0 + (m0 - mu) ** 2) / (2 * s * s) + n_c * log_ndtr((mu - log_c) / s))
 
-    start = np.array([max(m0, log_c) if n0 else log_c, np.log(max(s0, 0.3))])
+    start = np.array([max(m0, log_c), np.log(max(s0, 0.3))])
     res = minimize(nll, start, method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-9, "maxiter": 2000})
-    mu, s = float(res.x[0]), float(np.exp(res.x[1]))
-    # with no observed offset the scale is not identified: keep it from the observed ones (or 0.3)
-    return (mu, max(s, 0.05)) if n0 >= 2 else (log_c + 0.3, max(s0, 0.3))
+    return float(res.x[0]), max(float(np.exp(res.x[1])), 0.05)
 
 
 def _lognormal_moments(x: np.ndarray, noise_var: float) -> tuple[float, float] | None:
