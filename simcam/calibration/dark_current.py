@@ -84,6 +84,11 @@ def dark_current(darks: list[Sequence], K: float | None) -> dict:
     return out
 
 
+#: How many standard errors the dark variance's rise may fall short of K times the dark level's before the
+#: rise is not taken for Poisson charge (:func:`series_fit`)
+POISSON_Z = 3.0
+
+
 def series_fit(series: list, K: float | None) -> dict | None:
     """Dark current of dark frame stacks at several exposure times (the loop's ``CaptureData.dark_series``).
 
@@ -91,7 +96,8 @@ def series_fit(series: list, K: float | None) -> dict | None:
     None or <= 0: taken from the darks themselves, variance slope / mean slope, the dark current
     being Poisson). Returns None with fewer than two exposure times, else the slopes of the mean dark
     level (DN/s) and of the temporal variance (DN^2/s) against exposure time, the gain used, the
-    mean rate (e-/s, from the mean's slope) and the spread of the per-pixel rate: the log-normal
+    mean rate (e-/s, from the mean's slope; from the variance's where the two disagree: see the code) and
+    the spread of the per-pixel rate: the log-normal
     ``log_sigma`` whose interquartile range over median, with the temporal noise the slope carries,
     is that of the per-pixel least-squares slopes of the temporal-mean images (row and column
     profiles removed: they are not pixel dark current; :func:`lognormal_log_sigma`).
@@ -104,31 +110,71 @@ def series_fit(series: list, K: float | None) -> dict | None:
     times = sorted(by_t)
     if len(times) < 2:
         return None
-    mean, var, maps, noise = [], [], [], []
+    mean, var, maps, noise, var_maps, level_var = [], [], [], [], [], []
     for t in times:
         stacks = [f.astype(np.float64) for f in by_t[t]]
         n = np.array([s.shape[0] for s in stacks], dtype=np.float64)
         mean.append(float(np.average([s.mean() for s in stacks], weights=n)))
         v = float(np.average([np.mean(np.var(s, axis=0, ddof=1)) for s in stacks], weights=n))
         var.append(v)
+        m = n > 1
+        var_maps.append(sum(ni * np.var(s, axis=0, ddof=1) for ni, s, ok in zip(n, stacks, m) if ok) / max(n[m].sum(), 1))
         maps.append(sum(ni * s.mean(0) for ni, s in zip(n, stacks)) / n.sum())
         noise.append(v / n.sum())
+        # what all pixels of a frame share (a frame's offset) does not average out over the pixels: the
+        # sampling variance of the sequence's level from the scatter of its frame means about a line in
+        # the frame index (a drift over the sequence is not sampling noise of its level)
+        level_var.append(_level_variance([s.reshape(s.shape[0], -1).mean(axis=1) for s in stacks]))
     t = np.asarray(times)
     c = (t - t.mean()) / np.sum((t - t.mean()) ** 2)
     raw = sum(ci * m for ci, m in zip(c, maps))  # per-pixel least-squares slope (DN/s)
     # hot pixels whose charge grows with the exposure are no dark current of the array: slopes beyond
     # 10 robust sigma above the median are left out of the mean slope (the mean over the others)
     keep = raw <= np.median(raw) + 10 * robust_sigma(raw)
+    nk = max(int(keep.sum()), 1)
     slope_m = float(raw[keep].mean())
     slope_v = float(np.polyfit(t, var, 1)[0])
-    gain = float(K) if K is not None and np.isfinite(K) and K > 0 else (slope_v / slope_m if slope_m > 0 else 0.0)
-    slope_map = remove_profiles(raw)[keep] + float(np.median(raw))
+    se_m = float(np.sqrt(np.var(raw[keep]) / nk + np.sum(c ** 2 * np.asarray(level_var))))
+    # the variance's slope over the same pixels as the mean's, with its standard error
+    if all(np.ndim(vm) == 2 for vm in var_maps):
+        slope_vk = float(sum(ci * float(vm[keep].mean()) for ci, vm in zip(c, var_maps)))
+        se_v = float(np.sqrt(np.sum([ci ** 2 * float(np.var(vm[keep])) / nk for ci, vm in zip(c, var_maps)])))
+    else:  # an exposure time with single frames only: no temporal variance to compare
+        slope_vk, se_v = slope_v, 0.0
+    measured_k = K is not None and np.isfinite(K) and K > 0
+    gain = float(K) if measured_k else (slope_v / slope_m if slope_m > 0 else 0.0)
+    # Poisson charge raises the dark variance by K times the dark level's rise (EMVA 1288's mean and
+    # variance methods agree). A level that rises without it (a black level drifting with the exposure
+    # time or over the capture) is not dark current: where the variance slope falls short of K times the
+    # mean slope by more than POISSON_Z standard errors and by more than half, the rate is the
+    # variance method's (the Poisson part alone) and the rest of the rise is reported, not modelled.
+    se = float(np.hypot(se_v, gain * se_m))
+    z = (slope_vk - gain * slope_m) / se if measured_k and se_v > 0 else 0.0  # (a gain from the darks: no test)
+    poisson_m = slope_m
+    if gain > 0 and slope_m > 0 and z < -POISSON_Z and slope_vk < 0.5 * gain * slope_m:
+        poisson_m = max(slope_vk, 0.0) / gain
+    slope_map = remove_profiles(raw)[keep] + float(np.median(raw)) - (slope_m - poisson_m)
     noise_sd = float(np.sqrt(np.sum(c ** 2 * np.asarray(noise))))
-    log_sigma = lognormal_log_sigma(slope_map, slope_m, noise_sd) if slope_m > 0 else 0.0
+    log_sigma = lognormal_log_sigma(slope_map, poisson_m, noise_sd) if poisson_m > 0 else 0.0
     return {"exposure_s": times, "mean_dn": mean, "temporal_var_dn2": var, "dn_per_s": slope_m,
-            "dn2_per_s": slope_v, "gain_dn_per_e": gain,
-            "e_per_s": slope_m / gain if gain > 0 else 0.0,
-            "log_sigma": float(log_sigma)}
+            "dn2_per_s": slope_v, "dn_per_s_se": se_m, "dn2_per_s_se": se_v, "poisson_z": float(z),
+            "gain_dn_per_e": gain, "e_per_s": poisson_m / gain if gain > 0 else 0.0,
+            "non_poisson_dn_per_s": float(slope_m - poisson_m), "log_sigma": float(log_sigma)}
+
+
+def _level_variance(frame_means: list) -> float:
+    """Sampling variance of the mean level of sequences with these frame means: each sequence's residual
+    variance about a least-squares line in the frame index (n - 2 degrees of freedom), pooled, over the
+    frames in all; 0 where no sequence has 3 frames."""
+    ss, dof, n = 0.0, 0, 0
+    for fm in frame_means:
+        fm = np.asarray(fm, dtype=np.float64)
+        n += fm.size
+        if fm.size >= 3:
+            i = np.arange(fm.size, dtype=np.float64)
+            ss += float(np.sum((fm - np.polyval(np.polyfit(i, fm, 1), i)) ** 2))
+            dof += fm.size - 2
+    return ss / dof / n if dof else 0.0
 
 
 def _spread(x: np.ndarray) -> float:

@@ -534,8 +534,9 @@ class Loop:
         cand = fit_effect(effect, self.g.fit_data, model, ctx)
         rec["parameters"] = cand.effects[effect].to_dict()
         if card.is_null(cand.effects[effect]):
+            why = card.null_reason(cand.effects[effect])
             return dict(rec, skipped=f"the fitted {effect} has zero magnitude" + (
-                f" (nothing for the form {form!r} to model here)" if form else "")), None
+                f" (nothing for the form {form!r} to model here)" if form else "") + (f": {why}" if why else "")), None
         return rec, cand
 
     def _score(self, rec: dict, run: HeldOut, held_cur: dict) -> None:

@@ -366,6 +366,10 @@ class EffectCard:
         v = getattr(p, self.null_field)
         return max(abs(float(x) - self.null_value) for x in (v if isinstance(v, list) else [v])) < 1e-9
 
+    def null_reason(self, p: EffectParams) -> str | None:
+        """Why a fit came out null, where the card can say more than "zero magnitude" (None: it cannot)."""
+        return None
+
     def format(self, p: EffectParams | Mapping) -> str:
         """Parameters as the report shows them, with units (a mapping is read as this card's parameters)."""
         if not isinstance(p, EffectParams):

@@ -13,7 +13,11 @@ two exposure times or more separate it from the black level: at one exposure tim
 is an offset (``black_level_offset``) and its non-uniformity a DSNU. Being Poisson charge, it raises
 the dark temporal variance by K times the dark level's rise (``dark_variance_slope``, EMVA 1288's
 variance method, beside ``dark_signal_slope``): a dark level that rises between exposures without
-that growth (a black level drifting over the capture) scores worse with this effect than without it.
+that growth (a black level drifting over the capture) scores worse with this effect than without it,
+and the fit does not take it for dark current: where the variance's rise falls short of K times the
+level's by more than 3 standard errors and by more than half, the rate is the variance method's (the
+Poisson part alone) and what is left of the level's rise is reported (``non_poisson_dn_per_s``), not
+simulated.
 
 Fit. On the darks at every exposure time (the loop's dark diagnostics use the shortest one only,
 as EMVA 1288 measures the temporal dark noise there): least-squares slopes of the mean dark level
@@ -52,6 +56,9 @@ class DarkCurrent(EffectParams):
                                     profile="electron", per_full_scale=True)
     read_exposure_s: float = quantity("s", "exposure time of the darks the read noise is measured on (s)",
                                       default=0.0)
+    non_poisson_dn_per_s: float = quantity("DN/s", "rise of the dark level with the exposure time that the dark "
+                                           "variance does not follow (not Poisson charge: not in the rate, not "
+                                           "simulated)", default=0.0)
 
 
 class DarkCurrentCard(DeclaredProfileCard, name="dark_current", params=DarkCurrent,
@@ -61,9 +68,17 @@ class DarkCurrentCard(DeclaredProfileCard, name="dark_current", params=DarkCurre
     def fit(self, d, model, ctx):
         r = series_fit(_without_glow(d.dark_series or [], model), model.K)
         if r is None or r["e_per_s"] <= 0 or r["gain_dn_per_e"] <= 0:
-            return DarkCurrent(rate_e_per_s=0.0, log_sigma=0.0, gain_dn_per_e=float(max(model.K, 0.0)))
+            return DarkCurrent(rate_e_per_s=0.0, log_sigma=0.0, gain_dn_per_e=float(max(model.K, 0.0)),
+                               non_poisson_dn_per_s=float(r["non_poisson_dn_per_s"]) if r else 0.0)
         return DarkCurrent(rate_e_per_s=float(r["e_per_s"]), log_sigma=float(r["log_sigma"]),
-                           gain_dn_per_e=float(r["gain_dn_per_e"]), read_exposure_s=float(r["exposure_s"][0]))
+                           gain_dn_per_e=float(r["gain_dn_per_e"]), read_exposure_s=float(r["exposure_s"][0]),
+                           non_poisson_dn_per_s=float(r["non_poisson_dn_per_s"]))
+
+    def null_reason(self, p):
+        if p.non_poisson_dn_per_s > 0:
+            return (f"the dark level rises by {p.non_poisson_dn_per_s:.3g} DN/s with the exposure time and the "
+                    "dark temporal variance does not rise with it (not Poisson charge)")
+        return None
 
     def dark_variance_dn2(self, p):
         return float(p.gain_dn_per_e ** 2 * p.rate_e_per_s * p.read_exposure_s)

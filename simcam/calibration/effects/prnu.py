@@ -10,8 +10,11 @@ dissertation, York University, 2020, ch. 2, fixed-pattern noise). About the plan
 Fit. ``prnu_excess``: per CFA plane, the covariance of the even- and odd-frame mean maps of the
 flat minus the same of the darks, over the signal squared (only the fixed pattern survives in the
 covariance, offsets common to dark and flat cancel). With a modelled nonlinearity y(x) the
-measured relative spread is the linear one times the elasticity x y'(x) / y, divided out; so the
-estimate depends on the rest of the model and is refitted whenever another effect is added.
+measured relative spread is the linear one times the elasticity x y'(x) / y, divided out. With a
+modelled charge crosstalk (``charge_crosstalk``: photo-electrons shared with the adjacent pixels
+before read-out) the pattern is shared with the charge, ``(1 - 4c) n_p + c (4 adjacent n)``, so the
+measured variance is ``f sigma^2`` with ``f = (1 - 4c)^2 + 4c^2``, divided out too. The estimate
+depends on the rest of the model and is refitted whenever another effect is added.
 
 Profile. ``{type: prnu, sigma}``: the same dimensionless sigma.
 """
@@ -43,4 +46,9 @@ class PrnuCard(GainSigmaCard, name="prnu", params=Prnu, diagnostics=("prnu_exces
             s = model.full_scale_dn
             x = (np.sqrt(max(1 + 4 * c * y / s, 1e-9)) - 1) * s / (2 * c)
             sigma /= (x * (1 + 2 * c * x / s)) / y
+        cx = model.effects.get("charge_crosstalk")
+        if cx is not None and cx.c > 0:  # the sharing filters the pattern too: its variance is f sigma^2
+            from .charge_crosstalk import variance_factor
+
+            sigma /= float(np.sqrt(variance_factor(cx.c)))
         return Prnu(sigma=sigma)
