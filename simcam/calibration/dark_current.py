@@ -115,10 +115,12 @@ def series_fit(series: list, K: float | None) -> dict | None:
         stacks = [f.astype(np.float64) for f in by_t[t]]
         n = np.array([s.shape[0] for s in stacks], dtype=np.float64)
         mean.append(float(np.average([s.mean() for s in stacks], weights=n)))
-        v = float(np.average([np.mean(np.var(s, axis=0, ddof=1)) for s in stacks], weights=n))
+        pv = [np.var(s, axis=0, ddof=1) for s in stacks]  # per-pixel temporal variance (NaN for one frame)
+        v = float(np.average([np.mean(p) for p in pv], weights=n))
         var.append(v)
         m = n > 1
-        var_maps.append(sum(ni * np.var(s, axis=0, ddof=1) for ni, s, ok in zip(n, stacks, m) if ok) / max(n[m].sum(), 1))
+        var_maps.append(sum(ni * p for ni, p, ok in zip(n, pv, m) if ok) / max(n[m].sum(), 1))
+        del pv
         maps.append(sum(ni * s.mean(0) for ni, s in zip(n, stacks)) / n.sum())
         noise.append(v / n.sum())
         # what all pixels of a frame share (a frame's offset) does not average out over the pixels: the
