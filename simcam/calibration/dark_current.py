@@ -96,8 +96,10 @@ def series_fit(series: list, K: float | None) -> dict | None:
     None or <= 0: taken from the darks themselves, variance slope / mean slope, the dark current
     being Poisson). Returns None with fewer than two exposure times, else the slopes of the mean dark
     level (DN/s) and of the temporal variance (DN^2/s) against exposure time, the gain used, the
-    mean rate (e-/s, from the mean's slope; from the variance's where the two disagree: see the code) and
-    the spread of the per-pixel rate: the log-normal
+    mean rate (e-/s, from the mean's slope; from the variance's where the variance's rise falls short of K
+    times the mean's by more than :data:`POISSON_Z` standard errors and by more than half: ``poisson_z``,
+    ``non_poisson_dn_per_s``, the slopes' standard errors ``dn_per_s_se`` and ``dn2_per_s_se``) and the
+    spread of the per-pixel rate: the log-normal
     ``log_sigma`` whose interquartile range over median, with the temporal noise the slope carries,
     is that of the per-pixel least-squares slopes of the temporal-mean images (row and column
     profiles removed: they are not pixel dark current; :func:`lognormal_log_sigma`).
