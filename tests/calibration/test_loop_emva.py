@@ -2,6 +2,7 @@
 
 import re
 
+import numpy as np
 import pytest
 
 from shared_data import shared_path
@@ -53,9 +54,26 @@ def test_loop_on_emva_set_reports_before_after(tmp_path):
         h = it["heldout"]
         assert h["kl_before"] is not None and h["kl_after"] is not None
     assert g["heldout"]["kl_final"] <= g["heldout"]["kl_base"]
-    # the CCD's darks carry a per-frame offset alternating between interleaved sites (~20x the
-    # white-noise spread of the site means): outside the vocabulary, reported as such
-    assert "dark_checker_jitter" in {u["diagnostic"] for u in g["unexplained"]}
+    # every significant residual left is reported with its reason
+    assert all(u["reason"] for u in g["unexplained"])
+    # the CCD's darks carry a per-frame offset alternating between interleaved sites: over all 51 dark
+    # pairs the checkerboard contrast's variance is ~1,500x its white-noise value, but not in the pair at
+    # the shortest exposure time, which the loop's dark diagnostics use (EMVA 1288 Release 4.0), so the
+    # loop does not see it there
+    from simcam.calibration import diagnostics as dg
+    from simcam.calibration.capture import read_capture_set
+
+    cap = read_capture_set(desc.parent)
+    darks = [s for s in cap.group(cap.isos()[0]) if s.kind == "dark"]
+    shortest = min(s.exposure_s for s in darks)
+
+    def jitter(seqs):
+        d = dg.CaptureData([s.frames for s in seqs], [], [], np.zeros((2, 2)), darks[0].white_dn, darks[0].cfa)
+        return float(np.exp(dg.dark_checker_jitter(d)))
+
+    assert jitter(darks) > 100
+    assert jitter([s for s in darks if s.exposure_s == shortest]) < 10
+    assert "dark_checker_jitter" not in {u["diagnostic"] for u in g["unexplained"]}
 
 
 def test_emva_numbers_on_generated_cfa_set_match_the_generator():
