@@ -892,6 +892,67 @@ def _fixed_cov(frames: np.ndarray) -> list[float] | None:
     return out
 
 
+def _fixed_cov_blocks(frames: np.ndarray, blocks: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """:func:`_fixed_cov`'s even/odd-frame products per CFA plane, summed over ``blocks`` bands of rows:
+    (sums, pixel counts) per plane, for a jackknife over the bands."""
+    a = remove_profiles(frames[0::2].astype(np.float64).mean(0))
+    b = remove_profiles(frames[1::2].astype(np.float64).mean(0))
+    out = []
+    for dy, dx in PLANE_OFFSETS:
+        pa, pb = a[dy::2, dx::2], b[dy::2, dx::2]
+        ok = (np.abs(pa - np.median(pa)) < 6 * robust_sigma(pa)) & (np.abs(pb - np.median(pb)) < 6 * robust_sigma(pb))
+        if ok.sum() < 2:
+            raise NotApplicable("fewer than 2 pixels of a CFA plane inside 6 robust sigma of the even/odd-frame "
+                                "mean maps (constant or quantisation-dominated maps)")
+        prod = np.where(ok, (pa - pa[ok].mean()) * (pb - pb[ok].mean()), 0.0)
+        bands = np.array_split(np.arange(prod.shape[0]), blocks)
+        out.append((np.array([prod[r].sum() for r in bands]), np.array([ok[r].sum() for r in bands], np.float64)))
+    return out
+
+
+def prnu_by_level(d: CaptureData, blocks: int = 16) -> list[tuple[float, float, float]]:
+    """Per flat sequence of >= 2 frames, (signal above the darks, relative fixed-pattern variance, its
+    standard error): :func:`prnu_excess`'s estimate made on each flat, the standard error by a
+    jackknife over ``blocks`` bands of rows (the pattern is independent between bands). A gain
+    (PRNU) gives the same relative variance at every signal level (EMVA 1288 Release 4.0, sec. 8.2:
+    the PRNU is the spatial variance of the light's part over the signal squared, one number for the
+    sensor). Sorted by signal."""
+    if not d.flats:
+        return []
+    dm = d.dark_map()
+    cd = _fixed_cov_blocks(np.concatenate(d.darks), blocks) if dm is not None else None
+    out = []
+    for f in d.flats:
+        if f.shape[0] < 2:
+            continue
+        m = f.astype(np.float64).mean(0)
+        levels = []
+        for dy, dx in PLANE_OFFSETS:
+            lv = float(np.mean(m[dy::2, dx::2]))
+            if dm is not None:
+                lv -= float(np.mean(dm[0][dy::2, dx::2]))
+            elif d.black_dn is not None:
+                lv -= float(np.asarray(d.black_dn, dtype=np.float64).reshape(2, 2)[dy, dx])
+            levels.append(lv)
+        if min(levels) <= 0:
+            continue
+        cf = _fixed_cov_blocks(f, blocks)
+
+        def rel(keep):
+            v = []
+            for k, lv in enumerate(levels):
+                fk = cf[k][0][keep].sum() / max(cf[k][1][keep].sum(), 1.0)
+                dk = cd[k][0][keep].sum() / max(cd[k][1][keep].sum(), 1.0) if cd is not None else 0.0
+                v.append((fk - dk) / lv ** 2)
+            return float(np.mean(v))
+
+        full = rel(np.ones(blocks, bool))
+        jk = np.array([rel(np.arange(blocks) != i) for i in range(blocks)])
+        se = float(np.sqrt((blocks - 1) / blocks * np.sum((jk - jk.mean()) ** 2)))
+        out.append((float(np.mean(levels)), full, se))
+    return sorted(out)
+
+
 def prnu_excess(d: CaptureData):
     """Relative PRNU variance: per CFA plane, (fixed-pattern variance of the flat - that of the darks)
     / signal^2, averaged over the planes. Fixed-pattern variances are even/odd-frame covariances
