@@ -17,7 +17,7 @@ measured variance is ``f sigma^2`` with ``f = (1 - 4c)^2 + 4c^2``, divided out t
 depends on the rest of the model and is refitted whenever another effect is added.
 
 Check. A gain gives the same relative spread at every signal level. Where the capture has flats at
-two levels (the dimmer at >= 10 % of the brighter), the relative fixed-pattern variance is measured on
+two levels (the dimmer at 10-80 % of the brighter), the relative fixed-pattern variance is measured on
 each (:func:`simcam.calibration.diagnostics.prnu_by_level`, standard errors by a jackknife over bands
 of rows, a modelled nonlinearity's elasticity divided out at each level). Where the brighter flat's
 exceeds the dimmer's by more than ``LEVEL_Z`` standard errors, part of the pattern grows with the
@@ -49,7 +49,7 @@ class Prnu(EffectParams):
     sigma: float = quantity("%", "rms relative deviation of the per-pixel gain (dimensionless; shown in %)", scale=100.0,
                             profile="sigma")
     spread_growth: float | None = quantity("x", "relative spread of the brightest flat over that of the dimmest at "
-                                           ">= 10 % of its signal, where it grows significantly (else not given)",
+                                           "10-80 % of its signal, where it grows significantly (else not given)",
                                            default=None)
 
 
@@ -61,13 +61,13 @@ def _elasticity(c: float, y: float, s: float) -> float:
 
 def spread_growth(d, c: float, s: float) -> tuple[float, float, float, float] | None:
     """(ratio of the relative spreads, its z, level-independent relative variance, its standard error) of
-    the brightest flat against the dimmest at >= 10 % of its signal, a nonlinearity ``c`` (full scale
-    ``s``) divided out; None with fewer than two such flats."""
+    the brightest flat against the dimmest at 10-80 % of its signal, a nonlinearity ``c`` (full scale
+    ``s``) divided out; None without such a pair of flats."""
     rows = dg.prnu_by_level(d)
     if len(rows) < 2:
         return None
     hi = rows[-1]
-    lows = [r for r in rows[:-1] if r[0] >= 0.1 * hi[0]]
+    lows = [r for r in rows[:-1] if 0.1 * hi[0] <= r[0] <= 0.8 * hi[0]]  # two distinct levels
     if not lows:
         return None
     lo = lows[0]
