@@ -871,6 +871,20 @@ def hot_pixel_tail(d: CaptureData):
     return None if mask is None else float(np.mean(mask))
 
 
+def _fixed_planes(frames: np.ndarray):
+    """Per CFA plane, the even-frame and odd-frame mean maps (profiles removed) and the mask of pixels
+    within 6 robust sigma in both: ``(pa, pb, ok)``, the inputs of :func:`_fixed_cov`."""
+    a = remove_profiles(frames[0::2].astype(np.float64).mean(0))
+    b = remove_profiles(frames[1::2].astype(np.float64).mean(0))
+    for dy, dx in PLANE_OFFSETS:
+        pa, pb = a[dy::2, dx::2], b[dy::2, dx::2]
+        ok = (np.abs(pa - np.median(pa)) < 6 * robust_sigma(pa)) & (np.abs(pb - np.median(pb)) < 6 * robust_sigma(pb))
+        if ok.sum() < 2:
+            raise NotApplicable("fewer than 2 pixels of a CFA plane inside 6 robust sigma of the even/odd-frame "
+                                "mean maps (constant or quantisation-dominated maps)")
+        yield pa, pb, ok
+
+
 def _fixed_cov(frames: np.ndarray) -> list[float] | None:
     """Per CFA plane, the covariance of the even-frame and odd-frame mean maps (profiles removed,
     pixels beyond 6 robust sigma in either map left out): the variance of the fixed pattern alone,
@@ -878,16 +892,9 @@ def _fixed_cov(frames: np.ndarray) -> list[float] | None:
     i.i.d. pattern's variance with it (64 x 64 frames)."""
     if frames.shape[0] < 2:
         return None
-    a = remove_profiles(frames[0::2].astype(np.float64).mean(0))
-    b = remove_profiles(frames[1::2].astype(np.float64).mean(0))
     out = []
-    for dy, dx in PLANE_OFFSETS:
-        pa, pb = a[dy::2, dx::2], b[dy::2, dx::2]
-        ok = (np.abs(pa - np.median(pa)) < 6 * robust_sigma(pa)) & (np.abs(pb - np.median(pb)) < 6 * robust_sigma(pb))
+    for pa, pb, ok in _fixed_planes(frames):
         pa, pb = pa[ok], pb[ok]
-        if pa.size < 2:
-            raise NotApplicable("fewer than 2 pixels of a CFA plane inside 6 robust sigma of the even/odd-frame "
-                                "mean maps (constant or quantisation-dominated maps)")
         out.append(float(np.mean((pa - pa.mean()) * (pb - pb.mean()))))
     return out
 
@@ -895,15 +902,8 @@ def _fixed_cov(frames: np.ndarray) -> list[float] | None:
 def _fixed_cov_blocks(frames: np.ndarray, blocks: int) -> list[tuple[np.ndarray, np.ndarray]]:
     """:func:`_fixed_cov`'s even/odd-frame products per CFA plane, summed over ``blocks`` bands of rows:
     (sums, pixel counts) per plane, for a jackknife over the bands."""
-    a = remove_profiles(frames[0::2].astype(np.float64).mean(0))
-    b = remove_profiles(frames[1::2].astype(np.float64).mean(0))
     out = []
-    for dy, dx in PLANE_OFFSETS:
-        pa, pb = a[dy::2, dx::2], b[dy::2, dx::2]
-        ok = (np.abs(pa - np.median(pa)) < 6 * robust_sigma(pa)) & (np.abs(pb - np.median(pb)) < 6 * robust_sigma(pb))
-        if ok.sum() < 2:
-            raise NotApplicable("fewer than 2 pixels of a CFA plane inside 6 robust sigma of the even/odd-frame "
-                                "mean maps (constant or quantisation-dominated maps)")
+    for pa, pb, ok in _fixed_planes(frames):
         prod = np.where(ok, (pa - pa[ok].mean()) * (pb - pb[ok].mean()), 0.0)
         bands = np.array_split(np.arange(prod.shape[0]), blocks)
         out.append((np.array([prod[r].sum() for r in bands]), np.array([ok[r].sum() for r in bands], np.float64)))
