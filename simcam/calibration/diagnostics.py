@@ -19,6 +19,10 @@ row_spectrum_peak       periodic_pattern    max / median of the periodogram of r
                                             9-bin running median)
 col_spectrum_peak       periodic_pattern    same along columns
 col_temporal_excess     empirical_offset    var(column means of temporal residual) / (pixel var / H)
+row_mean_lag1           empirical_spectrum  lag-1 autocorrelation of the row means of the dark temporal
+                                            residual along the rows (frame mean removed), pooled over
+                                            frames: 0 for white row noise, > 0 for offsets that wander
+                                            from row to row (1/f)
 dark_checker_jitter     (none)              log of: var over dark frames of the checkerboard contrast
                                             of the temporal residual (sites 00 + 11 - 01 - 10) /
                                             (pixel var / pixels)
@@ -89,7 +93,7 @@ PLANE_OFFSETS = ((0, 0), (0, 1), (1, 0), (1, 1))
 #: (``dark_checker_jitter``) proposes none; ``col_temporal_excess`` proposes an empirical component.
 DIAGNOSTICS = (
     "ptc_curvature", "plane_gain_spread", "row_mean_excess", "row_spectrum_peak", "col_spectrum_peak",
-    "col_temporal_excess", "dark_checker_jitter", "col_fpn_excess", "col_fpn_spectrum_peak", "dsnu_excess",
+    "col_temporal_excess", "row_mean_lag1", "dark_checker_jitter", "col_fpn_excess", "col_fpn_spectrum_peak", "dsnu_excess",
     "hot_pixel_tail", "prnu_excess",
     "black_offset", "dark_signal_slope", "dark_variance_slope", "frame_mean_jitter", "frame_mean_drift",
     "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "lag1_corr",
@@ -116,6 +120,7 @@ NEEDS = {
     "plane_gain_spread": "needs a CFA sensor and flats (with darks, or >= 2 flats)",
     "row_mean_excess": "needs a dark or flat sequence",
     "col_temporal_excess": "needs a dark or flat sequence",
+    "row_mean_lag1": "needs a dark sequence of >= 2 frames and >= 4 rows",
     "row_spectrum_peak": "needs a dark or flat sequence",
     "col_spectrum_peak": "needs a dark or flat sequence",
     "dark_checker_jitter": "needs a dark sequence",
@@ -423,6 +428,26 @@ def row_mean_excess(d):
 
 def col_temporal_excess(d):
     return _excess(d, 1)
+
+
+def row_mean_lag1(d: CaptureData):
+    """Lag-1 autocorrelation along the rows of the dark temporal residual's row means (each frame's mean
+    removed), pooled over frames: ``sum m_i m_(i+1) / sum m_i^2``. White row noise and pixel noise give 0
+    (less 1/H); row offsets that wander slowly from row to row (1/f noise of the row reference) give a
+    positive value, an offset alternating between the two kinds of CFA row a negative one. Darks only: in
+    a flat, a per-frame gain times the flat's shading is a smooth row profile too."""
+    from .row_spectrum import row_mean_residuals
+
+    res = [r for r in row_mean_residuals(d) if r.shape[1] >= 4]
+    if not res:
+        return None
+    num = den = 0.0
+    for r in res:
+        m = r.mean(axis=2)
+        m = m - m.mean(axis=1, keepdims=True)
+        num += float(np.sum(m[:, 1:] * m[:, :-1]))
+        den += float(np.sum(m * m))
+    return _ratio(num, den, "the variance of the dark row means")
 
 
 def dark_checker_jitter(d: CaptureData):

@@ -78,7 +78,9 @@ def _split(fitted: EffectParams | Fit) -> tuple[EffectParams, float | None, floa
 def fit_effect(effect: str, d: dg.CaptureData, model: LoopModel, ctx: FitContext) -> LoopModel:
     """The model with ``effect`` added (parameters fitted on ``d`` by its card; a card that re-estimates
     the system gain sets K) and the read noise refitted; effects whose estimate depends on the rest of
-    the model (``refit_on_change``), or on ``effect`` (``refit_after``), are fitted again."""
+    the model (``refit_on_change``), or on ``effect`` (``refit_after``), are fitted again, and one whose
+    refit is the identity (:meth:`EffectCard.is_null`: ``row_noise`` once ``empirical_spectrum`` holds all
+    the row offsets' variance) leaves the model."""
     params, newK, read = _split(card_for(effect).fit(d, model, ctx))
     m = model.with_effect(effect, params)
     if newK is not None:
@@ -88,6 +90,10 @@ def fit_effect(effect: str, d: dg.CaptureData, model: LoopModel, ctx: FitContext
         m.set_dark_variance_from_read()
     for other in CARDS.values():
         if (other.refit_on_change or effect in other.refit_after) and other.name in m.effects and other.name != effect:
-            m.effects[other.name] = _split(other.fit(d, m, ctx))[0]
+            refit = _split(other.fit(d, m, ctx))[0]
+            if other.is_null(refit):
+                del m.effects[other.name]
+            else:
+                m.effects[other.name] = refit
             m.refit_read()
     return m

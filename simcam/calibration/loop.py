@@ -760,6 +760,9 @@ class Loop:
             }
             if card_for(effect).family is not None:  # an empirical component: its residual family
                 rec["not_in_vocabulary"] = card_for(effect).family
+            gone = [n for n in model.effects if n not in cand.effects]
+            if gone:  # refitted to the identity beside the new effect (simcam.calibration.fit.fit_effect)
+                rec["removed"] = {n: f"refitted to zero magnitude with {effect} in the model" for n in gone}
             res.plots.setdefault("hists", []).append(
                 (effect, held_cur["real_noise"], held_cur["model_noise"], held["model_noise"]))
             res.iterations.append(rec)

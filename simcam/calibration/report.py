@@ -70,7 +70,7 @@ def _plane_ptc(r: GroupResult) -> dict | None:
 FAMILY_DIAGNOSTICS = {
     "pixel": ("dsnu_excess", "hot_pixel_tail", "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "prnu_excess",
               "ptc_curvature", "plane_gain_spread", "black_offset"),
-    "row": ("row_mean_excess", "row_spectrum_peak"),
+    "row": ("row_mean_excess", "row_spectrum_peak", "row_mean_lag1"),
     "column": ("col_temporal_excess", "col_fpn_excess", "col_fpn_spectrum_peak", "col_spectrum_peak"),
     "temporal": ("dsnu_excess", "prnu_excess", "hot_pixel_tail", "col_fpn_excess", "col_fpn_spectrum_peak"),
     "block": ("lag1_corr", "lag2_corr", "dark_checker_jitter", "frame_spectrum_peak"),
@@ -621,6 +621,8 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
             h = it["heldout"]
             label = it["effect"] + (f" <i>(empirical, not in the vocabulary: {html.escape(it['not_in_vocabulary'])})</i>"
                                     if it.get("not_in_vocabulary") else "")
+            label += "".join(f"<br><i>{html.escape(n)} removed: {html.escape(why)}</i>"
+                             for n, why in (it.get("removed") or {}).items())
             parts.append(f"<tr><td>{i}</td><td class=l>{label}</td><td class=l>{it['diagnostic']}</td>"
                          f"<td>{_fmt(it['discrepancy_before'])}</td><td>{_fmt(it['discrepancy_after'])}</td>"
                          f"<td>{_fmt(h['discrepancy_before'])}</td><td>{_fmt(h['discrepancy_after'])}</td>"

@@ -325,6 +325,25 @@ def empirical_offset(group: Group, x, ctx: Ctx, st: EffectState):
     return x + (scale * draws).to(x.dtype)
 
 
+def empirical_spectrum(group: Group, x, ctx: Ctx, st: EffectState):
+    """Per-frame line offsets by spectral synthesis: white normals filtered by the measured ``sqrt(S(f))``
+    (the numpy effect's :meth:`~simcam.noise.effects.empirical.EmpiricalSpectrum.amplitudes` at this
+    frame's number of lines) in the Fourier domain."""
+    e0 = group.models[0]
+    row = e0.axis == "row"
+    n = x.shape[-2] if row else x.shape[-1]
+    scale = ctx.scalar(group, lambda e: e.scale, dtype=torch.float64)
+
+    def one(u, rows):
+        amp = torch.as_tensor(group.uniq[u].amplitudes(n), dtype=torch.float64, device=x.device)
+        z = torch.fft.rfft(ctx.randn((rows.shape[0], 1, n), dtype=torch.float64), dim=-1)
+        return torch.fft.irfft(z * amp, n=n, dim=-1)
+
+    draws = _by_model(group, torch.empty((x.shape[0], 1, n), dtype=torch.float64, device=x.device), one)
+    draws = draws[..., :, None] if row else draws[..., None, :]
+    return x + (scale * draws).to(x.dtype)
+
+
 def empirical_gain(group: Group, x, ctx: Ctx, st: EffectState):
     return x * st.fixed("gain")
 
@@ -342,7 +361,7 @@ EFFECTS = {
     "dead_pixels": dead_pixels, "rtn": rtn, "charge_crosstalk": charge_crosstalk, "adc_dnl": adc_dnl,
     "empirical_code": empirical_code, "dark_current": dark_current, "amp_glow": amp_glow,
     "empirical_field": empirical_field, "empirical_offset": empirical_offset, "empirical_gain": empirical_gain,
-    "empirical_lines": empirical_lines,
+    "empirical_lines": empirical_lines, "empirical_spectrum": empirical_spectrum,
 }
 
 #: fixed-draw keys that are 1-D tables, not maps (kept per distinct model, never cropped).

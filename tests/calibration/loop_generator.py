@@ -44,6 +44,9 @@ seed eq. 3.6 for the Poisson-Gaussian core)::
 * ``interleaved_columns``: columns in groups of ``period_px / 2`` alternate between two converters whose
   offsets differ by ``offset_dn`` (fixed, no random draw): also outside the vocabulary (a periodic
   column pattern, ``empirical_lines``).
+* ``row_wander``: per frame, row offsets that follow a first-order autoregression down the frame
+  (``o_i = rho o_(i-1) + sqrt(1 - rho^2) sigma_dn n_i``): coloured row noise, outside the vocabulary
+  (``empirical_spectrum``).
 * ``checker_offset`` N(0, s^2) per frame, added with opposite signs to the 00/11 and the 01/10
   sites (interleaved readout channels, as in the EMVA 1288 CCD data): also outside the vocabulary.
 """
@@ -237,6 +240,15 @@ class HiddenEffectSensor:
                 x = x + rng.normal(0, eff["row_noise"]["sigma_dn"], (h, 1))
             if "column_noise" in eff:  # NOT in simcam's vocabulary: tests the 'unexplained' path
                 x = x + rng.normal(0, eff["column_noise"]["sigma_dn"], (1, w))
+            if "row_wander" in eff:  # NOT in the vocabulary: row offsets wandering down the frame (AR(1))
+                p = eff["row_wander"]
+                rho = float(p["rho"])
+                o = np.empty(h)
+                o[0] = rng.normal(0, p["sigma_dn"])
+                kick = rng.normal(0, p["sigma_dn"] * np.sqrt(1 - rho * rho), h)
+                for i in range(1, h):
+                    o[i] = rho * o[i - 1] + kick[i]
+                x = x + o[:, None]
             if "checker_offset" in eff:  # NOT in the vocabulary: interleaved readout channels' offset
                 x = x + rng.normal(0, eff["checker_offset"]["sigma_dn"]) * self.checker
             if "periodic_pattern" in eff:

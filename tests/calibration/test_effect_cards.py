@@ -24,6 +24,7 @@ from simcam.calibration.effects.dead_pixels import DeadPixels
 from simcam.calibration.effects.dsnu import Dsnu
 from simcam.calibration.effects.empirical_lines import EmpiricalLines
 from simcam.calibration.effects.empirical_offset import EmpiricalOffset
+from simcam.calibration.effects.empirical_spectrum import EmpiricalSpectrum
 from simcam.calibration.effects.frame_flicker import FrameFlicker
 from simcam.calibration.effects.heavy_tail_read import HeavyTailRead
 from simcam.calibration.effects.hot_pixels import HotPixels
@@ -62,6 +63,8 @@ EXAMPLES = {
     "charge_crosstalk": ChargeCrosstalk(c=0.03),
     "empirical_offset": EmpiricalOffset(quantiles_dn=[float(x) for x in np.linspace(-3.0, 3.0, 33) ** 3 / 9]),
     "empirical_lines": EmpiricalLines(lines_dn=[[0.25, 1.4], [0.125, 0.5]]),
+    "empirical_spectrum": EmpiricalSpectrum(frequencies=[0.0156, 0.05, 0.2, 0.45], power_dn2=[9.0, 2.5, 0.4, 0.1],
+                                            dc_power_dn2=6.0),
 }
 #: diagnostics that by design propose no effect (outside the vocabulary)
 UNATTRIBUTED = {"dark_checker_jitter", "frame_mean_drift"}  # no effect of the vocabulary makes them
@@ -93,9 +96,10 @@ def test_every_effect_has_a_card():
     assert {e for e in DIAGNOSTIC_EFFECT.values() if e is not None} == names
     assert {d for d, e in DIAGNOSTIC_EFFECT.items() if e is None} == UNATTRIBUTED
     # the hidden effects of the test generator are the named vocabulary (empirical components stand for
-    # effects outside it: the generator's column_noise and interleaved_columns)
+    # effects outside it: the generator's column_noise, interleaved_columns and row_wander)
     assert set(EFFECTS) == {n for n, c in CARDS.items() if c.family is None}
-    assert {n for n, c in CARDS.items() if c.family is not None} == {"empirical_offset", "empirical_lines"}
+    assert {n for n, c in CARDS.items() if c.family is not None} == {"empirical_offset", "empirical_lines",
+                                                                      "empirical_spectrum"}
     # every effect type the loop writes to profile.yaml, and every one its bootstrap samples, has a card
     m = _model(dict(EXAMPLES))
     entry, _ = noise_entry(m)
@@ -180,12 +184,17 @@ def test_read_noise_bookkeeping_and_marginal_variance():
     read = m.read_dn
     m.refit_read()
     assert m.read_dn == pytest.approx(read)
-    assert m.var_dark_dn2 == pytest.approx(read ** 2 + 16 / 12 + 1.5 ** 2 + 2.0 ** 2 / 2)
+    # the coloured row offsets' variance: their spectrum's mean over the 64 frequencies k / 64 of the 64 rows it
+    # was measured on (1 / 0.0156), linear in log f between the bands, flat beyond them, its dc_power at f = 0
+    sp = EXAMPLES["empirical_spectrum"]
+    k = np.abs(np.fft.fftfreq(64))[1:]
+    row2 = (sp.dc_power_dn2 + float(np.sum(np.interp(np.log(k), np.log(sp.frequencies), sp.power_dn2)))) / 64
+    assert m.var_dark_dn2 == pytest.approx(read ** 2 + 16 / 12 + 1.5 ** 2 + 2.0 ** 2 / 2 + row2)
     y = np.linspace(0.0, 800.0, 64).reshape(8, 8)
     c = -0.1
     x = (np.sqrt(1 + 4 * c * y / FS) - 1) * FS / (2 * c)  # inverse of y = x + c x^2 / FS
     g = site_map([1.1, 1.0, 1.0, 0.9], y.shape)
-    temporal = 2.0 * g * x + read ** 2 + 1.5 ** 2 + 2.0 ** 2 / 2 + (0.005 * x) ** 2
+    temporal = 2.0 * g * x + read ** 2 + 1.5 ** 2 + row2 + 2.0 ** 2 / 2 + (0.005 * x) ** 2
     slope2 = (1 + 2 * c * x / FS) ** 2
     want = (temporal + (0.012 * x) ** 2) * slope2 + 2.0 ** 2 + 1.0 ** 2 + 16 / 12
     assert marginal_variance(m, y) == pytest.approx(want, rel=1e-9)
@@ -218,7 +227,8 @@ def _fit_data(name: str, seed: int = 3):
     side = 64 if name == "adc_dnl" else 32  # the histogram test needs >= 8 codes holding >= 100 values
     # an empirical component is fitted on the generator's effect outside the vocabulary it stands for
     outside = {"empirical_offset": {"column_noise": {"sigma_dn": 1.5}},
-               "empirical_lines": {"interleaved_columns": {"offset_dn": 3.0, "period_px": 4}}}
+               "empirical_lines": {"interleaved_columns": {"offset_dn": 3.0, "period_px": 4}},
+               "empirical_spectrum": {"row_wander": {"sigma_dn": 2.0, "rho": 0.8}}}
     effects = outside.get(name) or {name: DEFAULT_EFFECTS[name]}
     spec = SensorSpec(height=side, width=side, effects=effects)
     cs = in_memory_capture(capture_set(spec, n_frames=8, seed=seed))

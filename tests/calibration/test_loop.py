@@ -243,6 +243,27 @@ def test_periodic_column_pattern_gets_its_measured_lines_not_column_fpn(with_fpn
     assert all(x < 0.2 * a for _f, x in rest)
 
 
+def test_wandering_row_offsets_get_their_measured_spectrum_not_row_noise():
+    """Row offsets that follow a first-order autoregression down the frame (the generator's row_wander: sd 2 DN,
+    lag-1 correlation 0.8) raise the row means' variance as white row noise does, but are no independent
+    offset per row: the loop adds the empirical_spectrum component (row, temporal, additive), not row_noise,
+    and its variance is the generator's within 3 SE (6 fit frames of 64 rows: the low-frequency bands, which
+    hold most of an AR(1)'s power, have one periodogram bin each, relative SE 1/sqrt(6) = 41 %; the variance
+    ~ 22 % over 4 captures of the generator). A white part beside the coloured one is told apart on larger
+    sets (``test_row_spectrum.py``, 256 rows x 16 frames; on this 64-row set a 1.5-DN white part beside it
+    is not significant and stays inside the spectrum)."""
+    from loop_matrix import in_memory_capture
+    from simcam.calibration.effects.empirical_spectrum import variance_dn2
+    from simcam.calibration.loop import LoopConfig, run_loop
+
+    effects = {"row_wander": {"sigma_dn": 2.0, "rho": 0.8}}
+    r = run_loop(in_memory_capture(capture_set(SensorSpec(effects=effects))), LoopConfig())[0]
+    assert set(r.model.effects) == {"empirical_spectrum"}
+    it = next(i for i in r.iterations if i["accepted"] and i["effect"] == "empirical_spectrum")
+    assert it["not_in_vocabulary"].startswith("row, temporal, additive")
+    assert variance_dn2(r.model.effects["empirical_spectrum"]) == pytest.approx(4.0, rel=3 * 0.22)
+
+
 def test_checkerboard_frame_offset_outside_the_vocabulary_is_reported_unexplained():
     # a per-frame offset of opposite sign on the 00/11 and 01/10 sites (seen on the EMVA 1288 CCD
     # darks): no effect of the vocabulary makes it, so it must be reported, not forced into one.

@@ -74,6 +74,10 @@ EFFECT_CASES = {
     "empirical_gain": [{"type": "empirical_gain", "axis": "pixel", "quantiles": [0.9, 0.97, 1.0, 1.02, 1.1]}],
     "empirical_lines": [{"type": "empirical_lines", "axis": "column", "lines": [[0.25, 0.01], [0.1, 0.004]]},
                         {"type": "empirical_lines", "axis": "row", "lines": [[0.125, 0.006]]}],
+    "empirical_spectrum": [{"type": "empirical_spectrum", "axis": "row", "frequencies": [0.01, 0.05, 0.2, 0.5],
+                            "power": [4e-4, 1e-4, 2e-5, 1e-5]},
+                           {"type": "empirical_spectrum", "axis": "column", "frequencies": [0.02, 0.5],
+                            "power": [2e-4, 1e-5], "scale": 1.5}],
 }
 
 #: exposure time (seconds) given to both samplers (exposure-dependent effects).

@@ -16,7 +16,7 @@ from .. import diagnostics as _dg
 from . import (black_level_offset, channel_gain, column_fpn, dark_current, dead_pixels, dsnu, frame_flicker,
                heavy_tail_read, hot_pixels,
                nonlinearity, periodic_pattern, prnu, quantization, row_noise, spatial_correlation)
-from . import adc_dnl, amp_glow, charge_crosstalk, empirical_lines, empirical_offset, rtn
+from . import adc_dnl, amp_glow, charge_crosstalk, empirical_lines, empirical_offset, empirical_spectrum, rtn
 from .card import EffectCard, EffectParams, Fit, FitContext, ProfileTerm
 
 __all__ = ["CARDS", "DIAGNOSTIC_EFFECT", "EffectCard", "EffectParams", "Fit", "FitContext", "ProfileTerm",
@@ -34,6 +34,7 @@ CARDS: dict[str, EffectCard] = {c.name: c for c in (
     spatial_correlation.SpatialCorrelationCard(),
     rtn.RtnCard(),
     row_noise.RowNoiseCard(),
+    empirical_spectrum.EmpiricalSpectrumCard(),
     empirical_offset.EmpiricalOffsetCard(),
     periodic_pattern.PeriodicPatternCard(),
     dark_current.DarkCurrentCard(),

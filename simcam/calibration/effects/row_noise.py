@@ -10,7 +10,10 @@ quantisation) is taken off.
 
 Fit. Variance of the row means of the temporal residual (darks, else flats) minus the pixel
 variance's share ``var / W``; a modelled row-wise periodic pattern (``periodic_pattern``, axis row),
-already part of that variance, is taken off (amplitude^2 / 2).
+already part of that variance, is taken off (amplitude^2 / 2). Beside a modelled coloured row component
+(``empirical_spectrum``: offsets that wander from row to row), whose addition refits this one, the
+variance is the white part the spectral fit of the dark row means keeps beside the coloured one
+(:mod:`simcam.calibration.row_spectrum`; none when no white part is significant).
 
 Profile. ``{type: row_noise, sigma}`` with sigma on normalised raw, ``sigma_dn / (white - black)``.
 """
@@ -26,7 +29,8 @@ class RowNoise(EffectParams):
     sigma_dn: float = quantity("DN", "rms of a row's offset in one frame (DN)", profile="sigma", per_full_scale=True)
 
 
-class RowNoiseCard(OffsetSigmaCard, name="row_noise", params=RowNoise, diagnostics=("row_mean_excess",), marginal_rank=10):
+class RowNoiseCard(OffsetSigmaCard, name="row_noise", params=RowNoise, diagnostics=("row_mean_excess",), marginal_rank=10,
+                  refit_after=("empirical_spectrum",)):
 
     def fit(self, d, model, ctx):
         res = d.temporal_residuals("dark") or d.temporal_residuals("flat")
@@ -38,6 +42,14 @@ class RowNoiseCard(OffsetSigmaCard, name="row_noise", params=RowNoise, diagnosti
         per = model.effects.get("periodic_pattern")
         if per is not None and per.axis == "row":  # a modelled row-wise sinusoid is already part of it
             s2 -= per.amplitude_dn ** 2 / 2
+        if "empirical_spectrum" in model.effects:  # the wandering part of the row offsets is that component's
+            from ..row_spectrum import row_spectrum_of
+            from .empirical_spectrum import variance_dn2
+
+            spec = row_spectrum_of(d)
+            if spec is not None:  # the white part its spectral fit kept beside the coloured one (or none)
+                return RowNoise(sigma_dn=float(np.sqrt(spec.w)) if spec.white_part else 0.0)
+            s2 -= variance_dn2(model.effects["empirical_spectrum"])
         return RowNoise(sigma_dn=float(np.sqrt(max(s2, 0.0))))
 
     def dark_variance_dn2(self, p):

@@ -15,6 +15,9 @@ probabilities).
   column): a measured PRNU-like map or gain distribution;
 * ``empirical_lines`` — a fixed additive pattern along rows or columns given by its measured
   spectral lines (frequency, amplitude), phases drawn once per sensor;
+* ``empirical_spectrum`` — a temporal additive offset along rows or columns whose sequence has a
+  measured power spectrum (row offsets that wander from row to row: 1/f noise of the row reference),
+  drawn every frame by spectral synthesis;
 * ``empirical_code`` — the ADC's measured transition levels (DN): the code of each value;
 * ``empirical_field`` — a smooth measured dark field in normalised raw per second (glow-like),
   with its Poisson shot noise through ``electron``.
@@ -141,6 +144,71 @@ class EmpiricalLines(Effect):
 
     def apply(self, x, ctx):
         x += ctx.fixed["offset"][: x.shape[-2], : x.shape[-1]]
+        return x
+
+
+def spectrum_amplitudes(frequencies, power, n: int, dc_power: float | None = None) -> np.ndarray:
+    """``sqrt(S(f_k))`` on the ``rfft`` bins ``f_k = k / n`` of a length-``n`` sequence: the power table
+    interpolated linearly in log f, its end values beyond its range; at ``f = 0`` (the frame's mean
+    offset) ``dc_power``, or the lowest band's value when None."""
+    f = np.fft.rfftfreq(n)
+    p = np.asarray(power, np.float64)
+    s = np.full(f.size, p[0] if dc_power is None else float(dc_power))
+    if f.size > 1:
+        s[1:] = np.interp(np.log(f[1:]), np.log(np.asarray(frequencies, np.float64)), p)
+    return np.sqrt(np.maximum(s, 0.0))
+
+
+def spectrum_variance(frequencies, power, n: int = 1024, dc_power: float | None = None) -> float:
+    """Variance of one line offset of :class:`EmpiricalSpectrum` on a sequence of ``n`` lines (the mean of
+    the interpolated spectrum over the ``n`` frequencies ``k / n`` of the sequence, ``k = 0`` included)."""
+    a = spectrum_amplitudes(frequencies, power, n, dc_power) ** 2
+    full = np.concatenate((a, a[1:(n + 1) // 2][::-1])) if n > 1 else a
+    return float(np.sum(full) / n)
+
+
+@register_effect
+class EmpiricalSpectrum(Effect):
+    """A temporal offset shared along each row (``axis: row``; each column for ``axis: column``) whose
+    sequence over the rows has the measured power spectrum ``power`` at ``frequencies`` (cycles per
+    line, a periodogram level in normalised raw^2: a white sequence of variance v has v at every
+    frequency; ``dc_power`` at f = 0, the frame's mean offset: the lowest band's value when not given).
+    Every frame draws white normals, filters them by ``sqrt(S(f))`` in the Fourier domain
+    and transforms back (spectral synthesis of a Gaussian stationary sequence: D. B. Percival and A. T.
+    Walden, *Spectral Analysis for Physical Applications*, Cambridge University Press, 1993, ch. 7;
+    the same surrogate as :class:`EmpiricalLines`, drawn anew every frame), so the sequence keeps its
+    spectrum whatever the frame's size; ``scale`` multiplies the offsets."""
+
+    type: Literal["empirical_spectrum"] = "empirical_spectrum"
+    axis: Literal["row", "column"] = "row"
+    frequencies: list[float] = Field(min_length=1)
+    power: list[float] = Field(min_length=1)
+    dc_power: Optional[float] = Field(default=None, ge=0)
+    scale: float = 1.0
+
+    @model_validator(mode="after")
+    def _table(self):
+        f, p = self.frequencies, self.power
+        if len(f) != len(p):
+            raise ValueError(f"power: {len(p)} values for {len(f)} frequencies; expected one per frequency")
+        if any(not (0.0 < x <= 0.5) for x in f) or any(b <= a for a, b in zip(f, f[1:])):
+            raise ValueError("frequencies: expected increasing values in (0, 0.5] (cycles per line)")
+        if any(not (x >= 0.0) or not np.isfinite(x) for x in p):
+            raise ValueError("power: expected finite values >= 0")
+        return self
+
+    def amplitudes(self, n: int) -> np.ndarray:
+        """The filter of a sequence of ``n`` lines (:func:`spectrum_amplitudes`)."""
+        return spectrum_amplitudes(self.frequencies, self.power, n, self.dc_power)
+
+    def frame(self, shape, rng):
+        n = shape[0] if self.axis == "row" else shape[1]
+        z = np.fft.rfft(rng.standard_normal(n))
+        y = (self.scale * np.fft.irfft(z * self.amplitudes(n), n)).astype(np.float32)
+        return {"offset": y[:, None] if self.axis == "row" else y[None, :]}
+
+    def apply(self, x, ctx):
+        x += ctx.frame["offset"][: x.shape[0], : x.shape[1]]
         return x
 
 
