@@ -17,7 +17,9 @@ periodogram less the pixel noise's share and less a white part where a Whittle f
 power law or a first-order low-pass (:mod:`simcam.calibration.row_spectrum`: that part is ``row_noise``'s, which is refitted
 without this component's variance), averaged in bands evenly spaced in log frequency; bins of a periodic
 line (``periodic_pattern``'s) are left out. The power at frequency 0 (the frame's mean offset, which
-the row means of a frame cannot show) is measured on the dark frames' means.
+the row means of a frame cannot show) is measured on the dark frames' means. A spectrum the Whittle fit
+finds white (likelihood ratio of the coloured model against a white one at most 25) is no coloured
+component: the fit is null and says so (the white offsets are ``row_noise``'s).
 
 Profile. ``{type: empirical_spectrum, axis: row, frequencies, power, dc_power}`` (cycles per row; powers
 on normalised raw squared, ``power_dn2 / (white - black)^2``): the noise stage draws each frame's row
@@ -28,6 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..row_spectrum import COLOURED_LR
 from .card import EffectCard, EffectParams, ProfileTerm, quantity
 
 
@@ -38,6 +41,8 @@ class EmpiricalSpectrum(EffectParams):
     dc_power_dn2: float = quantity("DN^2", "the spectrum at frequency 0 (the frame's mean offset, from the dark "
                                    "frames' means)", default=0.0)
     axis: str = quantity("", "the line the offset is shared along (row)", scale=None, default="row")
+    coloured_lr: float | None = quantity("", "likelihood ratio of the coloured spectrum against a white one (fits "
+                                         "only)", default=None)
 
 
 def lines_of(p: EmpiricalSpectrum) -> int:
@@ -62,10 +67,17 @@ class EmpiricalSpectrumCard(EffectCard, name="empirical_spectrum", params=Empiri
         from ..row_spectrum import coloured_table, row_mean_residuals, row_spectrum_of
 
         spec = row_spectrum_of(d)
-        table = coloured_table(row_mean_residuals(d), spec) if spec is not None else None
-        if table is None:
-            return EmpiricalSpectrum(frequencies=[0.5], power_dn2=[0.0])
-        return EmpiricalSpectrum(frequencies=table[0], power_dn2=table[1], dc_power_dn2=table[2])
+        lr = None if spec is None else float(spec.lr_coloured)
+        table = coloured_table(row_mean_residuals(d), spec) if spec is not None and spec.coloured else None
+        if table is None:  # too few rows, or white row offsets (row_noise's)
+            return EmpiricalSpectrum(frequencies=[0.5], power_dn2=[0.0], coloured_lr=lr)
+        return EmpiricalSpectrum(frequencies=table[0], power_dn2=table[1], dc_power_dn2=table[2], coloured_lr=lr)
+
+    def null_reason(self, p):
+        if p.coloured_lr is not None and p.coloured_lr <= COLOURED_LR:
+            return (f"the dark row means' spectrum is white (likelihood ratio {p.coloured_lr:.3g} against a white "
+                    f"spectrum, <= {COLOURED_LR:g}): row offsets of row_noise, not a coloured component")
+        return None
 
     def marginal(self, p, v, lin, model):
         return v + variance_dn2(p)
@@ -82,7 +94,8 @@ class EmpiricalSpectrumCard(EffectCard, name="empirical_spectrum", params=Empiri
         f, s = np.asarray(p.frequencies, float), np.asarray(p.power_dn2, float)
         return (f"frequencies = {f.size} bands from {f.min():.3g} to {f.max():.3g} cycles/row; power_dn2 = "
                 f"from {s[0]:.3g} to {s[-1]:.3g} DN^2 (row offsets' sd {np.sqrt(variance_dn2(p)):.3g} DN); "
-                f"dc_power_dn2 = {p.dc_power_dn2:.3g} DN^2; axis = {p.axis}")
+                f"dc_power_dn2 = {p.dc_power_dn2:.3g} DN^2; axis = {p.axis}"
+                + ("" if p.coloured_lr is None else f"; coloured_lr = {p.coloured_lr:.3g}"))
 
     def to_profile(self, p, model):
         fs2 = model.full_scale_dn ** 2

@@ -10,7 +10,8 @@ quantisation) is taken off.
 
 Fit. Variance of the row means of the temporal residual (darks, else flats) minus the pixel
 variance's share ``var / W``; a modelled row-wise periodic pattern (``periodic_pattern``, axis row),
-already part of that variance, is taken off (amplitude^2 / 2). Beside a modelled coloured row component
+already part of that variance, is taken off (amplitude^2 / 2), so the effect is refitted when one is
+added after it. Beside a modelled coloured row component
 (``empirical_spectrum``: offsets that wander from row to row), whose addition refits this one, the
 variance is the white part the spectral fit of the dark row means keeps beside the coloured one
 (:mod:`simcam.calibration.row_spectrum`; none when no white part is significant).
@@ -30,7 +31,7 @@ class RowNoise(EffectParams):
 
 
 class RowNoiseCard(OffsetSigmaCard, name="row_noise", params=RowNoise, diagnostics=("row_mean_excess",), marginal_rank=10,
-                  refit_after=("empirical_spectrum",)):
+                  refit_after=("empirical_spectrum", "periodic_pattern")):
 
     def fit(self, d, model, ctx):
         res = d.temporal_residuals("dark") or d.temporal_residuals("flat")
