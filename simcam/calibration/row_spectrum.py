@@ -160,10 +160,11 @@ def fit_row_spectrum(res: list[np.ndarray]) -> RowSpectrum | None:
     # the white part is tested inside each shape and kept only if every shape needs it: across shapes, a
     # low-pass plus a white floor can mimic a power law over two decades (1/f^1.1 rows: likelihood ratio 13
     # against the power law alone, 1.4 inside the power law)
-    nowhite = _coloured(fc, pc, floor, m, False)
-    lr_white = min(2 * (_coloured(fc, pc, floor, m, False, only=sh)[0] - _coloured(fc, pc, floor, m, True, only=sh)[0])
-                   for sh, _grid in SHAPES)
-    full = _coloured(fc, pc, floor, m, True) if lr_white > WHITE_LR else nowhite
+    per = [(_coloured(fc, pc, floor, m, False, only=sh), _coloured(fc, pc, floor, m, True, only=sh))
+           for sh, _grid in SHAPES]  # (without, with) a white part, each shape
+    lr_white = min(2 * (no[0] - yes[0]) for no, yes in per)
+    nowhite = min((no for no, _yes in per), key=lambda x: x[0])
+    full = min((yes for _no, yes in per), key=lambda x: x[0]) if lr_white > WHITE_LR else nowhite
     return RowSpectrum(floor=floor, white=max(c - floor, 0.0), w=full[1], a=full[2], shape=full[3], param=full[4],
                        lr_coloured=max(2 * (l_white - full[0]), 0.0), lr_white=max(lr_white, 0.0),
                        bins=int(fc.size), excluded=int(p.size - fc.size))

@@ -98,8 +98,11 @@ def test_a_power_law_alone_keeps_no_white_part():
 
 
 def test_white_row_noise_has_no_coloured_part():
-    p = CARDS["empirical_spectrum"].fit(_darks(7, white=1.5), _model(), FitContext())
-    assert variance_dn2(p) < 0.1 * 1.5 ** 2
+    """White row offsets are row_noise's: the empirical component's fit is null and says why."""
+    card = CARDS["empirical_spectrum"]
+    p = card.fit(_darks(7, white=1.5), _model(), FitContext())
+    assert card.is_null(p) and variance_dn2(p) == 0.0
+    assert "spectrum is white" in card.null_reason(p) and "row_noise" in card.null_reason(p)
 
 
 def test_noise_stage_draws_the_table_spectrum():
