@@ -4,9 +4,10 @@ a row residual no named effect describes.
 Physics. ``row_noise`` gives every row of every frame an independent offset: along the rows its
 sequence is white. The row reference of many sensors carries flicker (1/f) noise instead, so the
 offset of a row is close to its neighbours' and drifts slowly down the frame (J. R. Janesick, *Photon
-Transfer*, SPIE 2007, ch. 9; EMVA 1288 Release 4.0, sec. 8, the spectrograms: a non-white temporal
-spectrum along the lines; A. Abdelhamed, *Noise Modelling for Smartphone Cameras*, PhD dissertation,
-York University, 2020, ch. 3: noise components fitted to measured statistics). The row means' variance
+Transfer*, SPIE 2007, ch. 9; EMVA 1288 Release 4.0, sec. 8, reads line patterns from spectrograms along
+the rows and columns, the view applied here to the temporal row offsets; A. Abdelhamed, *Noise
+Modelling for Smartphone Cameras*, PhD dissertation, York University, 2020, ch. 3: noise components
+fitted to measured statistics). The row means' variance
 (``row_mean_excess``) cannot tell the two apart; their lag-1 autocorrelation along the rows
 (``row_mean_lag1``, darks: 0 for white row noise) can, and nothing in the vocabulary proposes it, so
 the loop adds this *empirical* component and the report says it is not in the vocabulary, with its
@@ -14,9 +15,9 @@ family: row, temporal, additive (present in darks), not exposure-dependent.
 
 Fit. From the dark temporal residuals' row means (each frame's mean removed): their frame-averaged
 periodogram less the pixel noise's share and less a white part where a Whittle fit keeps one beside a
-power law or a first-order low-pass (:mod:`simcam.calibration.row_spectrum`: that part is ``row_noise``'s, which is refitted
-without this component's variance), averaged in bands evenly spaced in log frequency; bins of a periodic
-line (``periodic_pattern``'s) are left out. The power at frequency 0 (the frame's mean offset, which
+power law or a first-order low-pass (:mod:`simcam.calibration.row_spectrum`; that part is ``row_noise``'s,
+which is refitted to it), averaged in bands evenly spaced in log frequency; bins of a periodic line
+(``periodic_pattern``'s) are left out. The power at frequency 0 (the frame's mean offset, which
 the row means of a frame cannot show) is measured on the dark frames' means. A spectrum the Whittle fit
 finds white (likelihood ratio of the coloured model against a white one at most 25) is no coloured
 component: the fit is null and says so (the white offsets are ``row_noise``'s).
