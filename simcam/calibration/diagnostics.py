@@ -436,15 +436,14 @@ def row_mean_lag1(d: CaptureData):
     removed), pooled over frames: ``sum m_i m_(i+1) / sum m_i^2``. White row noise and pixel noise give 0
     (less 1/H); row offsets that wander slowly from row to row (1/f noise of the row reference) give a
     positive value, an offset alternating between the two kinds of CFA row a negative one. Darks only: in
-    a flat, a per-frame gain times the flat's shading is a smooth row profile too."""
-    from .row_spectrum import row_mean_residuals
-
-    res = [r for r in row_mean_residuals(d) if r.shape[1] >= 4]
-    if not res:
+    a flat, a per-frame gain times the flat's shading is a smooth row profile too. The row means are those
+    ``row_mean_excess`` already took (:func:`_line_means` of all residuals, the darks' first)."""
+    darks = d.temporal_residuals("dark")
+    means = [m for r, m in zip(darks, _line_means("all", 2, d)) if r.shape[0] >= 2 and r.shape[1] >= 4]
+    if not means:
         return None
     num = den = 0.0
-    for r in res:
-        m = r.mean(axis=2)
+    for m in means:
         m = m - m.mean(axis=1, keepdims=True)
         num += float(np.sum(m[:, 1:] * m[:, :-1]))
         den += float(np.sum(m * m))
