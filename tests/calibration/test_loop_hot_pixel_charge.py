@@ -61,3 +61,22 @@ def test_noise_stage_hot_electron_is_poisson_and_default_off():
     assert abs(float(x[:, hot].mean()) - off) < 0.02 * off
     # Poisson: variance = e * mean (normalised raw), within ~10 %
     assert abs(float(x[:, hot].var(axis=0, ddof=1).mean()) / (e * off) - 1) < 0.15
+
+
+def test_without_a_photon_transfer_the_gain_comes_from_the_hot_pixels_own_charge():
+    """Darks only (no flats, K unknown: 0): the card reads K from the hot pixels' variance excess over their
+    offsets. Its standard error from the closed form (a sample variance of m dof has variance 2 v^2 / m,
+    v_i = K^2 lambda_i + read^2 + 1/12): the estimate must lie within 4 of them."""
+    frames = _darks(shot=True, seed=5, n=16)
+    d = dg.CaptureData([frames], [], [], np.full((2, 2), BLACK), WHITE, "RGGB")
+    m = LoopModel("RGGB", np.full((2, 2), BLACK), WHITE, 0.0, READ, READ ** 2 + 1 / 12)
+    p = CARDS["hot_pixels"].fit(d, m, FitContext())
+    assert p.shot_noise is True
+    hot = dg.hot_pixel_mask(d)
+    off_dn = (frames.mean(0) - BLACK)[hot]
+    v = K * off_dn + READ ** 2 + 1 / 12
+    se = np.sqrt(np.sum(2 * v ** 2 / (frames.shape[0] - 1))) / off_dn.sum()
+    assert abs(p.gain_dn_per_e - K) < 4 * se, (p.gain_dn_per_e, se)
+    p0 = CARDS["hot_pixels"].fit(dg.CaptureData([_darks(shot=False, seed=5, n=16)], [], [], np.full((2, 2), BLACK),
+                                                WHITE, "RGGB"), m, FitContext())
+    assert p0.count and p0.shot_noise is None and p0.gain_dn_per_e is None  # a fixed offset: no gain read

@@ -24,7 +24,9 @@ defect), and dark electrons are Poisson: its temporal variance grows by ``K x of
 system gain in DN/e-; EMVA 1288 Release 4.0, sec. 4.2). ``shot_noise`` is fitted from the data: on
 when the detected pixels' temporal variance in the darks exceeds the others' by more than half of
 what Poisson charge would add (summed over the hot pixels), off (a fixed offset, e.g. an ADC or
-clamp defect) otherwise; it needs a measured K.
+clamp defect) otherwise. Without a measured K (darks only, no flats) the gain is read from the hot pixels
+themselves, their summed variance excess over their summed offsets, when that excess is significant
+(:func:`_own_gain`): the same law that gives K from a photon transfer, with dark charge as the signal.
 
 A hot pixel is a local dark current, so its signal grows with the exposure time (EMVA 1288 Release
 4.0, sec. 8.5: defect pixels show in the dark image at long exposures). With darks at two exposure
@@ -93,7 +95,11 @@ class HotPixelsCard(EffectCard, name="hot_pixels", params=HotPixels, null_field=
         vals = r[hot]
         logs = np.log(np.maximum(vals, 1e-3))
         K = float(getattr(model, "K", 0.0) or 0.0)
-        shot = _shot_noise(d, hot, vals, K)
+        if K > 0:
+            shot = _shot_noise(d, hot, vals, K)
+        else:  # no photon transfer (darks only): the hot pixels' own variance per DN of offset, if significant
+            K = _own_gain(d, hot, vals)
+            shot = K > 0
         log_mean, log_sigma = float(logs.mean()), float(max(logs.std(), 0.05))
         rate = rate_ls = None
         lines = _offset_and_rate(d, hot)
@@ -193,6 +199,35 @@ def _offset_and_rate(d, hot: np.ndarray):
     if off is None or rate is None:
         return None
     return off, (float(slope.mean()), rate[1])
+
+
+#: standard errors by which the hot pixels' summed temporal-variance excess must exceed 0 for a gain read
+#: from it (:func:`_own_gain`)
+OWN_GAIN_Z = 4.0
+
+
+def _own_gain(d, hot: np.ndarray, offsets: np.ndarray) -> float:
+    """The system gain K (DN/e-) the hot pixels' dark charge shows without a photon transfer: Poisson charge
+    adds ``K x offset`` to a pixel's temporal variance, so ``K = sum(v_i - v_0) / sum(offset_i)`` (``v_i`` a hot
+    pixel's temporal variance in the darks, ``v_0`` the others' median); 0 unless the summed excess is above
+    :data:`OWN_GAIN_Z` standard errors (a sample variance of ``m`` degrees of freedom has variance
+    ``2 v^2 / m``) and the offsets' sum is positive (a fixed offset: no excess)."""
+    if not hot.any() or not d.darks:
+        return 0.0
+    stacks = [f.astype(np.float64) for f in d.darks if f.shape[0] >= 2]
+    if not stacks:
+        return 0.0
+    dof = sum(f.shape[0] - 1 for f in stacks)
+    var = sum(np.var(f, axis=0, ddof=1) * (f.shape[0] - 1) for f in stacks) / dof
+    if np.ndim(var) != 2:
+        return 0.0
+    v0 = float(np.median(var[~hot]))
+    excess = float(np.sum(var[hot] - v0))
+    se = float(np.sqrt(np.sum(2.0 * var[hot] ** 2 / dof)))
+    total = float(np.sum(np.maximum(offsets, 0.0)))
+    if total <= 0 or not excess > OWN_GAIN_Z * se:
+        return 0.0
+    return excess / total
 
 
 def _shot_noise(d, hot: np.ndarray, offsets: np.ndarray, K: float) -> bool:
