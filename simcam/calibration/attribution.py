@@ -90,34 +90,36 @@ class Comparison:
         return sorted(self.per_diagnostic.items(), key=lambda kv: -abs(kv[1]))[:n]
 
 
-def predictive_logpdf(name: str, value: float, sims: np.ndarray, floor: float) -> float:
+def predictive_logpdf(name: str, value: float, sims: np.ndarray, floor: float, null: float | None = None) -> float:
     """Log-density of a statistic's held-out value: the count law of a pixel-share statistic whose
     replicates are not over-dispersed (:func:`simcam.calibration.diagnostics.count_law`: a probability
     per count, divided by the one-pixel ``floor`` to be a density on the share's scale), else
     :func:`t_logpdf`."""
-    law = dg.count_law(name, sims, floor)
+    law = dg.count_law(name, sims, floor, null)
     if law is None:
         return t_logpdf(value, sims, floor)
     return float(law.logpmf(int(round(value / floor))) - math.log(floor))
 
 
-def _scores(values: dict, sims: dict, floors: dict, names: list[str], drop: int | None) -> np.ndarray:
+def _scores(values: dict, sims: dict, floors: dict, names: list[str], drop: int | None, nulls: dict) -> np.ndarray:
     out = np.empty(len(names))
     for i, name in enumerate(names):
         s = np.asarray(sims[name], dtype=np.float64)
         if drop is not None:
             s = np.delete(s, drop)
-        out[i] = predictive_logpdf(name, values[name], s, floors[name])
+        out[i] = predictive_logpdf(name, values[name], s, floors[name], nulls.get(name))
     return out
 
 
-def _side(values: dict, sims: dict, floors: dict, names: list[str]) -> tuple[np.ndarray, list[np.ndarray]]:
+def _side(values: dict, sims: dict, floors: dict, names: list[str], nulls: dict) -> tuple[np.ndarray, list[np.ndarray]]:
     """One model's scores: on all its replicates, and with each replicate left out in turn."""
     R = len(sims[names[0]])
-    return _scores(values, sims, floors, names, None), [_scores(values, sims, floors, names, r) for r in range(R)]
+    return (_scores(values, sims, floors, names, None, nulls),
+            [_scores(values, sims, floors, names, r, nulls) for r in range(R)])
 
 
-def compare(values: dict, floors: dict, current: dict, candidate: dict, cache: dict | None = None) -> Comparison:
+def compare(values: dict, floors: dict, current: dict, candidate: dict, cache: dict | None = None,
+            nulls: dict | None = None) -> Comparison:
     """Held-out synthetic log-likelihood gain of ``candidate`` over ``current`` (module docstring).
 
     ``values``: diagnostic -> its value on the held-out data; ``floors``: diagnostic -> the
@@ -135,12 +137,13 @@ def compare(values: dict, floors: dict, current: dict, candidate: dict, cache: d
     R = len(current[names[0]])
     if any(len(current[n]) != R for n in names):
         raise ValueError("held-out replicates differ in number between the statistics")
-    a, a_loo = _side(values, candidate, floors, names)
+    nulls = nulls or {}
+    a, a_loo = _side(values, candidate, floors, names, nulls)
     key = (R, tuple(names))
     if cache is not None and key in cache:
         b, b_loo = cache[key]
     else:
-        b, b_loo = _side(values, current, floors, names)
+        b, b_loo = _side(values, current, floors, names, nulls)
         if cache is not None:
             cache[key] = (b, b_loo)
     loo = np.array([np.sum(x - y) for x, y in zip(a_loo, b_loo)])

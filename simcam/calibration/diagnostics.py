@@ -793,7 +793,68 @@ def defect_masks(d: CaptureData) -> tuple[np.ndarray, np.ndarray] | None:
     darks = [a for a in d.darks if a.shape[0]]
     stuck = _same_code([f] + darks)
     d.cache["defects"] = (dead & ~stuck, stuck)
+    d.cache["defect_inputs"] = (resp, [f] + darks)
     return d.cache["defects"]
+
+
+#: a closed-form expected count below this (per capture set) is taken as this: one pixel-share statistic
+#: must not outweigh the others by hundreds of nats in a held-out comparison
+COUNT_NULL_MIN = 1e-9
+
+
+def defect_null_count(d: CaptureData) -> float | None:
+    """Expected number of :func:`defect_pixels` on ``d`` if no pixel were defective, a closed-form upper
+    bound from the data's own noise (None where the statistic is undefined).
+
+    Dead: a pixel's response (flat minus dark) below :data:`DEAD_RESPONSE` of its plane's median ``m``, for
+    a Gaussian spread of the responses of robust SD ``s`` (:func:`robust_sigma`, PRNU and noise together):
+    ``n_plane Phi(-(1 - DEAD_RESPONSE) m / s)`` per plane. Stuck: one code in all ``N`` frames of the flat
+    and the darks. A frame of a sequence whose pixels have temporal variance ``v`` (the median over the
+    pixels, quantisation's ``q^2 / 12`` taken off) lands in any one code of width ``q`` (the ADC's step,
+    :func:`code_histogram`) with probability at most ``p = erf(q / (2 sqrt(2 v)))`` (the code centred on the
+    mean), so all frames share the first one's code with probability at most ``prod_s p_s^n_s / max_s p_s``
+    (ignoring that the flat's and the darks' means differ, which makes it far smaller still). Each pixel
+    once: ``H W`` times that. Why closed form: a handful of stuck pixels in 25 k is a certain defect, but
+    with 12 replicates that all count 0 the replicates' count law (:func:`count_law`) cannot put the rate
+    below ~1/24 per set (p ~ 0.005 for 2 pixels, not significant among ~30 statistics)."""
+    if "defect_null" in d.cache:
+        return d.cache["defect_null"]
+    if defect_masks(d) is None:
+        d.cache["defect_null"] = None
+        return None
+    resp, seqs = d.cache["defect_inputs"]
+    lam = 0.0
+    step = 2 if d.cfa is not None else 1
+    for dy, dx in PLANE_OFFSETS if d.cfa is not None else ((0, 0),):
+        r = resp[dy::step, dx::step]
+        med, sd = float(np.median(r)), robust_sigma(r)
+        lam += r.size * (float(sst.norm.cdf(-(1.0 - DEAD_RESPONSE) * med / sd)) if sd > 0 else 0.0)
+    hist = code_histogram(d)
+    q = hist[1] if hist is not None else 1.0
+    logp = []
+    for a in seqs:
+        if a.shape[0] < 2 or a.shape[1:] != seqs[0].shape[1:]:
+            continue
+        g = a[:, ::4, ::4].astype(np.float64)  # a thin grid: the median of the pixels' variances
+        v = float(np.median(np.var(g, axis=0, ddof=1))) - q * q / 12.0
+        pr = math.erf(q / (2.0 * math.sqrt(2.0 * v))) if v > 0 else 1.0
+        logp.append((a.shape[0], math.log(pr) if pr > 0 else -math.inf))
+    if logp:
+        lam += resp.size * math.exp(sum(n * lp for n, lp in logp) - max(lp for _n, lp in logp))
+    d.cache["defect_null"] = max(lam, COUNT_NULL_MIN)
+    return d.cache["defect_null"]
+
+
+def count_null(name: str, d: CaptureData) -> float | None:
+    """The closed-form expected count of a :data:`COUNT_SHARES` statistic on ``d`` under a model without the
+    effect that makes its pixels, where one exists (``defect_pixels``: :func:`defect_null_count`), else None.
+    :func:`count_law` takes it where every replicate counts 0."""
+    if name != "defect_pixels":
+        return None
+    try:
+        return defect_null_count(d)
+    except NotApplicable:
+        return None
 
 
 def _same_code(seqs) -> np.ndarray:
@@ -1524,7 +1585,7 @@ COUNT_SHARES = frozenset({"defect_pixels", "telegraph_pixels", "hot_pixel_tail"}
 COUNT_LAW_MAX_MEAN = 3.0
 
 
-def count_law(name: str, sims: np.ndarray, unit: float):
+def count_law(name: str, sims: np.ndarray, unit: float, null: float | None = None):
     """The predictive law of a new count for a :data:`COUNT_SHARES` statistic, or None (use the t law).
 
     The replicates' counts (``sims / unit``) are taken as Poisson with rate lambda; with Jeffreys' prior
@@ -1535,10 +1596,17 @@ def count_law(name: str, sims: np.ndarray, unit: float):
     15 degrees of freedom); the count law gives p ~ 4e-7. It is used where the replicates' mean count is
     under :data:`COUNT_LAW_MAX_MEAN` (a few pixels: the t law's continuous spread does not describe a
     count there) and they are no more dispersed than Poisson; elsewhere the t law on their own spread.
+
+    ``null``: the closed-form bound on the count of a model without the pixels' effect (:func:`count_null`).
+    Where every replicate counts 0 and the bound is below the predictive mean above (``1 / (2R)``), the
+    new count is Poisson with the bound as its mean (a few replicates cannot bound a rate the physics puts
+    at 1e-10); a larger bound says nothing the replicates do not (constant or quantisation-dominated frames).
     """
     if name not in COUNT_SHARES or not unit > 0 or sims.size < 2:
         return None
     c = np.round(np.asarray(sims, dtype=np.float64) / unit)
+    if null is not None and not c.any() and null < 0.5 / c.size:
+        return sst.poisson(max(float(null), COUNT_NULL_MIN))
     if c.mean() >= COUNT_LAW_MAX_MEAN or c.var(ddof=1) > max(c.mean(), 0.0):
         return None
     R = c.size
@@ -1546,15 +1614,16 @@ def count_law(name: str, sims: np.ndarray, unit: float):
 
 
 def count_p_value(n_obs: int, law) -> float:
-    """Two-sided p-value of the count ``n_obs`` under the discrete ``law`` (twice the smaller tail)."""
-    return min(1.0, 2.0 * min(float(law.sf(n_obs - 1)), float(law.cdf(n_obs))))
+    """Two-sided p-value of the count ``n_obs`` under the discrete ``law`` (twice the smaller tail; at least
+    1e-300, so that its z is finite)."""
+    return max(min(1.0, 2.0 * min(float(law.sf(n_obs - 1)), float(law.cdf(n_obs)))), 1e-300)
 
 
-def discrepancy(name: str, value: float, sims: list[float], floor: float) -> Discrepancy:
+def discrepancy(name: str, value: float, sims: list[float], floor: float, null: float | None = None) -> Discrepancy:
     s = np.asarray(sims, dtype=np.float64)
     R = s.size
     sd = max(float(s.std(ddof=1)), floor)
-    law = count_law(name, s, floor)
+    law = count_law(name, s, floor, null)
     if law is not None:
         p = count_p_value(int(round(value / floor)), law)
         diff = value - float(s.mean())

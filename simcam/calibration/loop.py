@@ -408,7 +408,7 @@ class HeldOut:
             vals = self.sims[name]
             if loop.held_stats.get(name) is None or any(v is None for v in vals):
                 continue
-            out[name] = dg.discrepancy(name, loop.held_stats[name], vals, loop.held_floor(name))
+            out[name] = dg.discrepancy(name, loop.held_stats[name], vals, loop.held_floor(name), loop.held_null(name))
         return out
 
 
@@ -424,7 +424,7 @@ class Loop:
         self.data_stats = dg.compute_all(group.fit_data, reasons=self.not_applicable)
         self.held_stats = dg.compute_all(group.held_data)
         self.applicable = [k for k, v in self.data_stats.items() if v is not None]
-        self._floors: dict[str, float] = {}
+        self._floors: dict = {}  # diagnostic -> resolution; ("null", diagnostic) -> closed-form count
         self._data_sides: dict[bytes, tuple] = {}  # digest of the held-out clean levels -> HeldOut's data side
         self.threads = _threads(cfg)
 
@@ -455,6 +455,14 @@ class Loop:
         if name not in self._floors:
             self._floors[name] = dg.resolution(name, self.g.held_data)
         return self._floors[name]
+
+    def held_null(self, name: str) -> float | None:
+        """The closed-form count of a pixel-count statistic on the held-out data under a model without its
+        effect (:func:`diagnostics.count_null`), or None."""
+        key = ("null", name)
+        if key not in self._floors:
+            self._floors[key] = dg.count_null(name, self.g.held_data)
+        return self._floors[key]
 
     def map(self, fn, items, what: str):
         """``fn`` over ``items`` on :attr:`threads` threads (numpy and the noise kernels release the GIL),
@@ -510,7 +518,8 @@ class Loop:
                 self.not_applicable[name] = (f"undefined on {undefined} of {len(vals)} simulated captures of the "
                                              "current model (no bootstrap null)")
                 continue
-            discs.append(dg.discrepancy(name, self.data_stats[name], vals, dg.resolution(name, self.g.fit_data)))
+            discs.append(dg.discrepancy(name, self.data_stats[name], vals, dg.resolution(name, self.g.fit_data),
+                                        dg.count_null(name, self.g.fit_data)))
         return dg.holm(discs, self.cfg.alpha)
 
     def heldout(self, model: LoopModel, diagnostics=()) -> dict:
@@ -543,7 +552,8 @@ class Loop:
         """``rec`` gets the held-out comparison of ``run``'s replicates with the current model's same ones."""
         n = run.done
         cur = {k: v[:n] for k, v in held_cur["sims"].items()}
-        cmp = compare(self.held_stats, self._floor_map(), cur, run.sims, held_cur.setdefault("_scores", {}))
+        cmp = compare(self.held_stats, self._floor_map(), cur, run.sims, held_cur.setdefault("_scores", {}),
+                      self._null_map())
         rec.update({"heldout_gain": cmp.gain, "heldout_gain_sd": cmp.sd, "statistics_compared": cmp.diagnostics,
                     "moved_most": [{"diagnostic": k, "gain": g} for k, g in cmp.top()], "replicates": n,
                     "_beats": cmp.beats()})
@@ -659,6 +669,9 @@ class Loop:
 
     def _floor_map(self) -> dict:
         return {n: self.held_floor(n) for n in self.applicable}
+
+    def _null_map(self) -> dict:
+        return {n: self.held_null(n) for n in self.applicable}
 
     def run(self, start: LoopModel | None = None) -> GroupResult:
         cfg = self.cfg
