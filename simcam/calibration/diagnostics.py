@@ -49,7 +49,7 @@ dark_variance_slope     dark_current        least-squares slope of the dark temp
                                             (DN^2/s; EMVA 1288's variance method)
 frame_mean_jitter       frame_flicker       frame-to-frame var of flat frame means (from their successive
                                             differences about their mean) / signal^2
-frame_mean_drift        (none)              log(var of frame means / half their mean square successive
+frame_mean_drift        empirical_offset    log(var of frame means / half their mean square successive
                                             difference), darks and flats (a level drifting over frames)
 dark_tail_mass          heavy_tail_read     fraction of dark residuals beyond 4 IQR-sigma
 dark_ppcc_lambda        heavy_tail_read     Tukey-lambda shape maximising the PPCC of dark residuals
@@ -90,8 +90,8 @@ PLANE_OFFSETS = ((0, 0), (0, 1), (1, 0), (1, 1))
 
 #: The battery, in report order. The effect each one proposes is on the effect's card
 #: (``EffectCard.diagnostics``, :mod:`simcam.calibration.effects`); a diagnostic no card claims
-#: (``dark_checker_jitter``) proposes none; ``col_temporal_excess``, ``col_fpn_spectrum_peak`` and ``row_mean_lag1``
-#: propose empirical components.
+#: (``dark_checker_jitter``) proposes none; ``col_temporal_excess``, ``frame_mean_drift``, ``col_fpn_spectrum_peak``
+#: and ``row_mean_lag1`` propose empirical components.
 DIAGNOSTICS = (
     "ptc_curvature", "plane_gain_spread", "row_mean_excess", "row_spectrum_peak", "col_spectrum_peak",
     "col_temporal_excess", "row_mean_lag1", "dark_checker_jitter", "col_fpn_excess", "col_fpn_spectrum_peak", "dsnu_excess",
@@ -1110,7 +1110,8 @@ def frame_mean_drift(d: CaptureData):
     successive difference (the inverse of von Neumann's ratio, 1941), averaged over the dark and flat
     sequences of >= 4 frames: about 0 when the frame means are independent from frame to frame, positive
     when the level drifts over the sequence (a black level or a gain that warms up), negative when it
-    alternates. No effect of the vocabulary drifts: the bootstrap null is that of independent frames."""
+    alternates. No effect of the vocabulary drifts: the bootstrap null is that of independent frames. It
+    proposes the frame form of ``empirical_offset`` (the spread of the dark frames' levels, drawn per frame)."""
     vals = []
     for m in [*d.frame_means("dark"), *d.frame_means("flat")]:
         if m.size < 4:

@@ -771,8 +771,9 @@ class Loop:
                 "accepted": accepted,
                 "candidates": [t[0] for t in tried],
             }
-            if card_for(effect).family is not None:  # an empirical component: its residual family
-                rec["not_in_vocabulary"] = card_for(effect).family
+            family = card_for(effect).family_of(cand.effects[effect])
+            if family is not None:  # an empirical component: its residual family
+                rec["not_in_vocabulary"] = family
             gone = [n for n in model.effects if n not in cand.effects]
             if gone:  # refitted to the identity beside the new effect (simcam.calibration.fit.fit_effect)
                 rec["removed"] = {n: f"refitted to zero magnitude with {effect} in the model" for n in gone}

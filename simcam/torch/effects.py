@@ -312,6 +312,8 @@ def empirical_field(group: Group, x, ctx: Ctx, st: EffectState):
 
 def empirical_offset(group: Group, x, ctx: Ctx, st: EffectState):
     e0 = group.models[0]
+    if any(e.rate != 0 for e in group.uniq):  # a black level rising with the exposure time
+        x = x + (ctx.scalar(group, lambda e: e.rate, dtype=torch.float64) * _exposure(st, "empirical_offset")).to(x.dtype)
     if not e0.temporal:
         return x + st.fixed("offset")
     size = {"pixel": x.shape[-2:], "row": (x.shape[-2], 1), "column": (1, x.shape[-1]), "frame": (1, 1)}[e0.axis]

@@ -90,3 +90,72 @@ def test_drift_statistics_not_applicable_on_short_sequences():
     assert value is None and "exposure times" in why
     with pytest.raises(dg.NotApplicable):
         dg.frame_mean_jitter(capture([], [frames(rng, 1, 500.0)]))
+
+
+def _frame_fit(darks, flats=()):
+    from simcam.calibration.effects import CARDS, FitContext
+    from simcam.calibration.model import LoopModel
+
+    d = capture(darks, list(flats))
+    m = LoopModel("RGGB", np.full((2, 2), BLACK), WHITE, K, READ, READ ** 2 + 1 / 12)
+    return CARDS["empirical_offset"].fit(d, m, FitContext(form="frame")), m
+
+
+def test_frame_offset_fit_recovers_the_frame_levels_spread_beside_row_noise():
+    """Per-frame dark offsets N(0, 1.5^2) DN beside white row offsets of 2 DN (which put 4 / H DN^2 into
+    each frame's mean): the frame form's variance is 2.25 within 3 standard errors of a sample variance of
+    10 x 15 degrees of freedom (2.25 sqrt(2 / 150)); without frame offsets it is ~0."""
+    from simcam.calibration.effects.empirical_offset import quantile_table_moments
+
+    rng = np.random.default_rng(11)
+
+    def seq(frame_sd):
+        f = frames(rng, 16, offsets=rng.normal(0, frame_sd, 16) if frame_sd else None)
+        return f + np.round(rng.normal(0, 2.0, (16, H, 1))).astype(np.float32)
+
+    p, _m = _frame_fit([seq(1.5) for _ in range(10)])
+    var = quantile_table_moments(p.quantiles_dn)[1]
+    assert p.axis == "frame" and abs(var - 2.25) < 3 * 2.25 * np.sqrt(2 / 150), var
+    p0, _m = _frame_fit([seq(0.0) for _ in range(10)])
+    assert quantile_table_moments(p0.quantiles_dn)[1] < 0.02
+
+
+def test_frame_offset_fit_takes_a_ramp_as_its_spread_and_a_gain_drift_as_nothing():
+    from simcam.calibration.effects import CARDS
+    from simcam.calibration.effects.empirical_offset import quantile_table_moments
+
+    rng = np.random.default_rng(12)
+    ramp = np.linspace(0.0, 4.0, 16)  # a black level warming up by 4 DN over the sequence
+    p, m = _frame_fit([frames(rng, 16, offsets=ramp) for _ in range(4)])
+    assert quantile_table_moments(p.quantiles_dn)[1] == pytest.approx(np.var(ramp), rel=0.15)
+    entry = CARDS["empirical_offset"].to_profile(p, m).effect
+    assert entry["axis"] == "frame" and entry["temporal"] is True
+    back = CARDS["empirical_offset"].from_profile(entry, m.full_scale_dn)
+    assert back.axis == "frame" and np.allclose(back.quantiles_dn, p.quantiles_dn)
+    # a gain that drifts shows in the flats only: the darks' frame form is null
+    gains = np.linspace(0.98, 1.02, 16)
+    p0, _m = _frame_fit([frames(rng, 16) for _ in range(4)], [frames(rng, 16, 1000.0, gains=gains)])
+    assert CARDS["empirical_offset"].is_null(p0) or quantile_table_moments(p0.quantiles_dn)[1] < 0.02
+
+
+def test_frame_form_keeps_a_dark_level_rising_with_exposure_without_shot_noise():
+    """A black level that warms up over each sequence (ramp of 3 DN) and sits 1.5 DN/s higher per second of
+    exposure (no Poisson charge: dark_current's fit is null on it): the frame form keeps the rise. Its
+    standard error: two levels 1.98 s apart, each the mean of 16 frame means of spread ~0.9 DN
+    (sqrt(2 x 0.9^2 / 16) / 1.98 = 0.16 DN/s); within 3 of them. Equal levels: no rate."""
+    from simcam.calibration.effects import CARDS, FitContext
+    from simcam.calibration.model import LoopModel
+
+    rng = np.random.default_rng(13)
+    ramp = np.linspace(0.0, 3.0, 16)
+
+    def series(per_s):
+        return [(t, frames(rng, 16, offsets=ramp + per_s * t)) for t in (0.02, 2.0)]
+
+    m = LoopModel("RGGB", np.full((2, 2), BLACK), WHITE, K, READ, READ ** 2 + 1 / 12)
+    for per_s, lo, hi in ((1.5, 1.5 - 0.48, 1.5 + 0.48), (0.0, 0.0, 0.0)):
+        s = series(per_s)
+        d = dg.CaptureData([s[0][1]], [], [], np.full((2, 2), BLACK), WHITE, "RGGB", dark_series=s)
+        p = CARDS["empirical_offset"].fit(d, m, FitContext(form="frame"))
+        assert lo <= p.rate_dn_per_s <= hi, (per_s, p.rate_dn_per_s)
+        assert CARDS["dark_current"].fit(d, m, FitContext()).rate_e_per_s == 0.0 or per_s == 0.0

@@ -67,7 +67,7 @@ EXAMPLES = {
                                             dc_power_dn2=6.0),
 }
 #: diagnostics that by design propose no effect (outside the vocabulary)
-UNATTRIBUTED = {"dark_checker_jitter", "frame_mean_drift"}  # no effect of the vocabulary makes them
+UNATTRIBUTED = {"dark_checker_jitter"}  # no effect of the vocabulary makes it
 WHITE, BLACK = 1023.0, 64.0
 FS = WHITE - BLACK
 

@@ -61,6 +61,23 @@ def test_temporal_row_offsets_follow_the_measured_distribution():
     assert np.allclose(x, x[:, :, :1])  # one offset per row and frame
 
 
+def test_frame_offset_rate_adds_rate_times_exposure_and_is_left_out_of_the_entry_at_zero():
+    q = [-1e-3, 0.0, 1e-3]
+    entry = {"type": "empirical_offset", "axis": "frame", "temporal": True, "quantiles": q}
+    assert "rate" not in comp([entry]).effects[0].to_entry()  # off: the entry keeps its former keys
+    m = comp([dict(entry, rate=2e-3)])
+    clean = np.zeros((4, 4), np.float32)
+    for t in (0.5, 2.0):
+        x = m.sample_frames(clean, NoiseCondition(cfa="RGGB", source="test", exposure_s=t), np.random.default_rng(1),
+                            4000)
+        means = x.mean(axis=(1, 2))
+        assert np.allclose(x, means[:, None, None])  # one offset per frame, shared by every pixel
+        # the frame law is uniform on [-1e-3, 1e-3] (sd 5.8e-4) about 2e-3 t: the mean within 4 SE
+        assert abs(means.mean() - 2e-3 * t) < 4 * 1e-3 / np.sqrt(3) / np.sqrt(4000)
+    with pytest.raises(NoiseModelError, match="exposure"):
+        m.sample_frames(clean, NoiseCondition(cfa="RGGB", source="test"), np.random.default_rng(1), 2)
+
+
 def test_empirical_gain_multiplies_the_signal():
     m = comp([{"type": "empirical_gain", "axis": "column", "quantiles": [0.9, 1.1]}])
     x = m.sample(np.full((16, 400), 0.5, np.float32), COND, np.random.default_rng(0))

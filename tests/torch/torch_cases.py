@@ -70,7 +70,9 @@ EFFECT_CASES = {
     "empirical_field": [{"type": "empirical_field", "field": [[0.05, 0.1, 0.2], [0.02, 0.04, 0.3]], "electron": 2.5e-3}],
     "empirical_offset": [{"type": "empirical_offset", "axis": "row", "quantiles": [-0.01, -0.002, 0.0, 0.003, 0.02]},
                          {"type": "empirical_offset", "axis": "frame", "temporal": True,
-                          "quantiles": [-0.004, 0.0, 0.001, 0.006], "scale": 1.5}],
+                          "quantiles": [-0.004, 0.0, 0.001, 0.006], "scale": 1.5},
+                         {"type": "empirical_offset", "axis": "frame", "temporal": True,  # a level rising with t
+                          "quantiles": [-0.002, 0.0, 0.002], "rate": 0.003}],
     "empirical_gain": [{"type": "empirical_gain", "axis": "pixel", "quantiles": [0.9, 0.97, 1.0, 1.02, 1.1]}],
     "empirical_lines": [{"type": "empirical_lines", "axis": "column", "lines": [[0.25, 0.01], [0.1, 0.004]]},
                         {"type": "empirical_lines", "axis": "row", "lines": [[0.125, 0.006]]}],

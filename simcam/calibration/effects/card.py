@@ -366,6 +366,11 @@ class EffectCard:
         v = getattr(p, self.null_field)
         return max(abs(float(x) - self.null_value) for x in (v if isinstance(v, list) else [v])) < 1e-9
 
+    def family_of(self, p: EffectParams) -> str | None:
+        """The residual family of the fitted component ``p`` (a card with several forms tells them apart;
+        default :attr:`family`)."""
+        return self.family
+
     def null_reason(self, p: EffectParams) -> str | None:
         """Why a fit came out null, where the card can say more than "zero magnitude" (None: it cannot)."""
         return None

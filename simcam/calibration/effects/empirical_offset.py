@@ -1,4 +1,5 @@
-"""``empirical_offset``: a measured per-frame column offset, for a residual no named effect explains.
+"""``empirical_offset``: a measured per-frame column offset, or a per-frame offset of the whole frame, for
+a residual no named effect explains.
 
 Physics. Some sensors add an offset to each *column* of each frame, drawn anew every frame (temporal
 column noise: column-parallel ADCs or amplifiers with their own 1/f noise and a shared reference,
@@ -18,8 +19,29 @@ probabilities 0, 1/32, ..., 1) of the column means, centred and shrunk towards t
 ``s / sd(column means)`` (the Gaussian deconvolution of the white part; exact when both are
 Gaussian), so a skewed or heavy-tailed column noise keeps its shape.
 
-Profile. The noise stage's ``{type: empirical_offset, axis: column, temporal: true, quantiles}``
-(quantiles on normalised raw; drawn by inverse transform every frame).
+Frame form (``axis: frame``). A black level that wanders from frame to frame (a clamp or reference that
+settles with die temperature, a supply that drifts) moves every pixel of a frame alike; none of the named
+effects does (``frame_flicker`` is a gain on the light: darks do not show it). ``frame_mean_drift`` (the
+frame means of a sequence varying more slowly than independent frames would: the inverse of von
+Neumann's ratio, J. von Neumann, *Ann. Math. Statist.* 12, 1941) proposes it. Fit from the darks only
+(an offset is present in them; a drifting *gain* shows in the flats alone and leaves this fit null): each
+dark sequence's frame means of the temporal residual; their variance is the offset's s^2 plus what the
+rows, columns and pixels put there, ``var(row means) / H + var(column means) / W - var(pixels) / (H W)``
+per frame (each line's mean of the frame's residual about the frame's mean; the pixel part is in both
+terms once), scaled by n / (n - 1) (residuals about the sequence's temporal mean). The law is the
+measured one as above (33 quantiles of the frame means, shrunk by ``s / sd``). The noise stage draws the
+offset independently every frame: it reproduces the spread of the frame levels, not their order (a
+drift's ramp is a sequence, which a per-frame draw does not have), so ``frame_mean_drift`` itself stays
+unexplained. A level that drifts with temperature also sits higher in longer darks (self-heating): with
+darks at two exposure times or more the form keeps the dark level's rise per second that the model's
+``dark_current`` does not make (its ``non_poisson_dn_per_s``, the rise the dark variance does not follow;
+without dark current the whole rise), when beyond 3 standard errors (``rate_dn_per_s``, added to every
+pixel as ``rate x t``, no shot noise); it is refitted when ``dark_current`` joins. A model holds one
+``empirical_offset``: column or frame.
+
+Profile. The noise stage's ``{type: empirical_offset, axis: column | frame, temporal: true, quantiles}``
+(quantiles on normalised raw; drawn by inverse transform every frame), with ``rate`` (normalised raw per
+second) where the frame form has one.
 """
 
 from __future__ import annotations
@@ -43,16 +65,42 @@ def quantile_table_moments(q) -> tuple[float, float]:
 
 
 class EmpiricalOffset(EffectParams):
-    quantiles_dn: list = quantity("DN", "quantiles of one column's offset in one frame at probabilities 0, 1/32, "
-                                  "..., 1 (DN, mean 0)")
-    axis: str = quantity("", "the line the offset is shared along (column)", scale=None, default="column")
+    quantiles_dn: list = quantity("DN", "quantiles of one column's (or the frame's) offset in one frame at "
+                                  "probabilities 0, 1/32, ..., 1 (DN, mean 0)")
+    axis: str = quantity("", "what the offset is shared by: each column (column) or the whole frame (frame)",
+                         scale=None, default="column")
+    rate_dn_per_s: float = quantity("DN/s", "rise of the whole frame's level per second of exposure, without shot "
+                                    "noise (frame form)", default=0.0)
+
+
+#: the residual family of each form (the report's "not in the vocabulary" line)
+FAMILIES = {"column": "column, temporal, additive (present in darks), not exposure-dependent",
+            "frame": "frame, temporal, additive (present in darks), not exposure-dependent",
+            "frame_rate": "frame, temporal, additive (present in darks), exposure-dependent"}
 
 
 class EmpiricalOffsetCard(EffectCard, name="empirical_offset", params=EmpiricalOffset,
-                          diagnostics=("col_temporal_excess",), gaussian=False,
-                          family="column, temporal, additive (present in darks), not exposure-dependent"):
+                          diagnostics=("col_temporal_excess", "frame_mean_drift"), gaussian=False,
+                          family=FAMILIES["column"], refit_after=("dark_current",)):
+
+    def variants(self, proposed_by):
+        # one candidate per form the proposals point to: the frame form from frame_mean_drift
+        out, forms = [], set()
+        for p in proposed_by:
+            form = "frame" if p.name == "frame_mean_drift" else "column"
+            if form not in forms:
+                forms.add(form)
+                out.append((p, "frame") if form == "frame" else p)
+        return out
+
+    def family_of(self, p):
+        if p.axis == "frame" and p.rate_dn_per_s:
+            return FAMILIES["frame_rate"]
+        return FAMILIES.get(p.axis, self.family)
 
     def fit(self, d, model, ctx):
+        if ctx.form == "frame":
+            return _fit_frame(d, model)
         res = d.temporal_residuals("dark") or d.temporal_residuals("flat")
         means, excess = [], []
         for r in res:
@@ -65,10 +113,7 @@ class EmpiricalOffsetCard(EffectCard, name="empirical_offset", params=EmpiricalO
         sd = float(np.std(m))
         if not (s2 > 0 and sd > 0):
             return EmpiricalOffset(quantiles_dn=[0.0] * N_QUANTILES)
-        q = np.quantile(m, np.linspace(0.0, 1.0, N_QUANTILES))
-        q = (q - np.median(m)) * min(np.sqrt(s2) / sd, 1.0)
-        q -= quantile_table_moments(q)[0]
-        return EmpiricalOffset(quantiles_dn=[float(x) for x in q])
+        return EmpiricalOffset(quantiles_dn=_shrunk_quantiles(m, s2))
 
     def format(self, p):
         if not isinstance(p, EffectParams):
@@ -76,10 +121,11 @@ class EmpiricalOffsetCard(EffectCard, name="empirical_offset", params=EmpiricalO
         q = np.asarray(p.quantiles_dn, dtype=np.float64)
         sd = np.sqrt(quantile_table_moments(q)[1])
         return (f"quantiles_dn = {q.size} quantiles, sd {sd:.3g} DN, from {q[0]:.3g} to {q[-1]:.3g} DN, median "
-                f"{float(np.interp(0.5, np.linspace(0, 1, q.size), q)):.3g} DN; axis = {p.axis}")
+                f"{float(np.interp(0.5, np.linspace(0, 1, q.size), q)):.3g} DN; axis = {p.axis}; "
+                f"rate_dn_per_s = {p.rate_dn_per_s:.3g} DN/s")
 
     def is_null(self, p):
-        return quantile_table_moments(p.quantiles_dn)[1] <= 0.0
+        return quantile_table_moments(p.quantiles_dn)[1] <= 0.0 and not p.rate_dn_per_s
 
     def dark_variance_dn2(self, p):
         return quantile_table_moments(p.quantiles_dn)[1]
@@ -88,12 +134,80 @@ class EmpiricalOffsetCard(EffectCard, name="empirical_offset", params=EmpiricalO
         from .card import ProfileTerm
 
         fs = model.full_scale_dn
-        return ProfileTerm(effect={"type": self.name, "axis": p.axis, "temporal": True,
-                                   "quantiles": [float(x) / fs for x in p.quantiles_dn]})
+        entry = {"type": self.name, "axis": p.axis, "temporal": True, "quantiles": [float(x) / fs for x in p.quantiles_dn]}
+        if p.rate_dn_per_s:
+            entry["rate"] = float(p.rate_dn_per_s) / fs
+        return ProfileTerm(effect=entry)
 
     def from_profile(self, entry, full_scale_dn):
-        if entry.get("map") is not None or not entry.get("temporal", False) or entry.get("axis", "pixel") != "column":
-            raise ValueError("the loop reads an empirical_offset entry only as a temporal column offset given by "
-                             "quantiles (axis: column, temporal: true)")
+        axis = entry.get("axis", "pixel")
+        if entry.get("map") is not None or not entry.get("temporal", False) or axis not in ("column", "frame"):
+            raise ValueError("the loop reads an empirical_offset entry only as a temporal column or frame offset "
+                             "given by quantiles (axis: column or frame, temporal: true)")
         return EmpiricalOffset(quantiles_dn=[float(x) * full_scale_dn * float(entry.get("scale", 1.0))
-                                             for x in entry["quantiles"]], axis="column")
+                                             for x in entry["quantiles"]], axis=axis,
+                               rate_dn_per_s=float(entry.get("rate", 0.0)) * full_scale_dn)
+
+
+def _shrunk_quantiles(m: np.ndarray, s2: float) -> list:
+    """The :data:`N_QUANTILES` quantiles of the values ``m``, centred on their median and shrunk by
+    ``sqrt(s2) / sd(m)`` (the Gaussian deconvolution of the white part), mean 0; zeros if s2 or sd is 0."""
+    sd = float(np.std(m))
+    if not (s2 > 0 and sd > 0):
+        return [0.0] * N_QUANTILES
+    q = np.quantile(m, np.linspace(0.0, 1.0, N_QUANTILES))
+    q = (q - np.median(m)) * min(np.sqrt(s2) / sd, 1.0)
+    q -= quantile_table_moments(q)[0]
+    return [float(x) for x in q]
+
+
+#: standard errors by which the dark level's unexplained rise per second must differ from 0 to be kept
+RATE_Z = 3.0
+
+
+def _exposure_rate(d, model) -> float:
+    """The rise of the dark level per second of exposure (DN/s) that the model's ``dark_current`` does not
+    make (its ``non_poisson_dn_per_s``, a rise the dark variance does not follow; without dark current the
+    whole rise): each dark sequence's level is the 1 %-trimmed mean of its temporal-mean image, as
+    ``dark_signal_slope``'s; the slope is the least-squares one weighted by frame count, its standard error
+    from each level's (its frames' means' variance over their number); 0 unless beyond :data:`RATE_Z` of
+    them, or with darks at fewer than 2 exposure times."""
+    from scipy import stats as sst
+
+    series = [(float(t), f) for t, f in (d.dark_series or []) if f.shape[0] >= 2]
+    if len({t for t, _ in series}) < 2:
+        return 0.0
+    t = np.array([ti for ti, _ in series])
+    n = np.array([f.shape[0] for _, f in series], dtype=np.float64)
+    level = np.array([float(sst.trim_mean(f.astype(np.float64).mean(0).ravel(), 0.01)) for _, f in series])
+    var = np.array([float(np.var(f.astype(np.float64).mean(axis=(1, 2)), ddof=1)) / f.shape[0] for _, f in series])
+    tc = t - np.sum(n * t) / n.sum()
+    c = n * tc / np.sum(n * tc * tc)  # weighted least-squares slope weights
+    slope, se = float(np.sum(c * level)), float(np.sqrt(np.sum(c * c * var)))
+    dc = model.effects.get("dark_current")
+    if dc is not None:
+        slope = float(dc.non_poisson_dn_per_s)
+    return slope if abs(slope) > RATE_Z * se else 0.0
+
+
+def _fit_frame(d, model) -> EmpiricalOffset:
+    """The frame form's fit from the dark sequences of >= 4 frames (module docstring); null without them."""
+    rate = _exposure_rate(d, model)
+    means, excess = [], []
+    for r in d.temporal_residuals("dark"):
+        n, h, w = r.shape
+        if n < 4:
+            continue
+        fm = r.mean(axis=(1, 2))  # (n,) frame means of the residual (they sum to 0 over the sequence)
+        white = 0.0
+        for f in r:
+            rm = f.mean(axis=1)
+            cm = f.mean(axis=0)
+            white += float(np.var(rm)) / h + float(np.var(cm)) / w - float(np.var(f)) / (h * w)
+        white *= 1.0 / (n - 1)  # mean over n frames, times n / (n - 1)
+        means.append(fm - fm.mean())
+        excess.append(float(np.sum(fm * fm)) / (n - 1) - white)
+    if not means:
+        return EmpiricalOffset(quantiles_dn=[0.0] * N_QUANTILES, axis="frame", rate_dn_per_s=rate)
+    return EmpiricalOffset(quantiles_dn=_shrunk_quantiles(np.concatenate(means), max(float(np.mean(excess)), 0.0)),
+                           axis="frame", rate_dn_per_s=rate)

@@ -11,7 +11,7 @@ the signal the base model allows).
 Fit. ``frame_mean_jitter`` (frame-to-frame variance of the flat frame means, as half their mean
 square successive difference, over the signal squared): sigma^2 is its excess over the mean of the
 bootstrap replicates of the current model. A level drifting slowly over the sequence adds little to
-it (``frame_mean_drift`` sees that, and no effect of the vocabulary makes it), so a drift is not
+it (``frame_mean_drift`` sees that, and no named effect makes it), so a drift is not
 fitted as flicker.
 
 Profile. ``{type: frame_flicker, sigma}``: the same dimensionless sigma.

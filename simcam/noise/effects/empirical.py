@@ -10,7 +10,9 @@ sampled by inverse transform (``np.interp`` of uniform draws on the quantiles at
 probabilities).
 
 * ``empirical_offset`` — an additive offset along ``axis`` (pixel, row, column, frame), fixed
-  (a map, or a per-sensor draw from ``quantiles``) or temporal (a fresh draw every frame);
+  (a map, or a per-sensor draw from ``quantiles``) or temporal (a fresh draw every frame), plus an
+  optional ``rate`` per second of exposure shared by every pixel (a black level that rises with the
+  exposure time, without the shot noise of dark charge);
 * ``empirical_gain`` — a multiplicative fixed pattern of the expected signal (pixel, row,
   column): a measured PRNU-like map or gain distribution;
 * ``empirical_lines`` — a fixed additive pattern along rows or columns given by its measured
@@ -65,11 +67,22 @@ class _MapOrQuantiles(Effect):
 
 @register_effect
 class EmpiricalOffset(_MapOrQuantiles):
-    """Measured additive offset (normalised raw) along ``axis``; ``temporal``: a fresh draw each frame."""
+    """Measured additive offset (normalised raw) along ``axis``; ``temporal``: a fresh draw each frame.
+
+    ``rate`` (normalised raw per second, default 0): every pixel also gets ``rate * t``, t the frame's
+    exposure time (a black level that rises with the exposure, e.g. a clamp that self-heating shifts;
+    no shot noise, unlike ``dark_current``); with it the noise stage needs the exposure time."""
 
     type: Literal["empirical_offset"] = "empirical_offset"
     axis: Literal["pixel", "row", "column", "frame"] = "pixel"
     temporal: bool = False
+    rate: float = 0.0
+
+    def to_entry(self):
+        out = super().to_entry()
+        if self.rate == 0:  # no exposure dependence: the entry as before the option existed
+            out.pop("rate")
+        return out
 
     @model_validator(mode="after")
     def _axis(self):
@@ -91,6 +104,8 @@ class EmpiricalOffset(_MapOrQuantiles):
     def apply(self, x, ctx):
         off = ctx.frame["offset"] if self.temporal else ctx.fixed["offset"]
         x += off[: x.shape[0], : x.shape[1]]  # (H, W), (H, 1), (1, W) or (1, 1)
+        if self.rate != 0:
+            x += np.float32(self.rate * exposure_of(ctx, self.type))
         return x
 
 
