@@ -159,3 +159,19 @@ def test_frame_form_keeps_a_dark_level_rising_with_exposure_without_shot_noise()
         p = CARDS["empirical_offset"].fit(d, m, FitContext(form="frame"))
         assert lo <= p.rate_dn_per_s <= hi, (per_s, p.rate_dn_per_s)
         assert CARDS["dark_current"].fit(d, m, FitContext()).rate_e_per_s == 0.0 or per_s == 0.0
+
+
+def test_a_frame_offset_leaves_the_read_noise_alone():
+    """The read noise is measured with each frame's mean removed (photon-transfer points): a whole frame's
+    offset is not in it, so adding the frame form must not lower the read noise; a column offset is in it."""
+    from simcam.calibration.effects.empirical_offset import EmpiricalOffset
+    from simcam.calibration.model import LoopModel
+
+    q = list(np.linspace(-2.0, 2.0, 33))
+    reads = []
+    for eff in ({}, {"empirical_offset": EmpiricalOffset(quantiles_dn=q, axis="frame")},
+                {"empirical_offset": EmpiricalOffset(quantiles_dn=q, axis="column")}):
+        m = LoopModel("RGGB", np.full((2, 2), BLACK), WHITE, K, READ, READ ** 2 + 1 / 12, effects=dict(eff))
+        m.refit_read()
+        reads.append(m.read_dn)
+    assert reads[1] == reads[0] and reads[2] < reads[0]

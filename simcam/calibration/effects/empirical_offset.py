@@ -128,7 +128,9 @@ class EmpiricalOffsetCard(EffectCard, name="empirical_offset", params=EmpiricalO
         return quantile_table_moments(p.quantiles_dn)[1] <= 0.0 and not p.rate_dn_per_s
 
     def dark_variance_dn2(self, p):
-        return quantile_table_moments(p.quantiles_dn)[1]
+        # the read noise is measured with each frame's mean removed (``CaptureData.ptc_points``): a column
+        # offset is in that variance, a whole frame's offset is not
+        return 0.0 if p.axis == "frame" else quantile_table_moments(p.quantiles_dn)[1]
 
     def to_profile(self, p, model):
         from .card import ProfileTerm
