@@ -51,6 +51,8 @@ frame_mean_jitter       frame_flicker       frame-to-frame var of flat frame mea
                                             differences about their mean) / signal^2
 frame_mean_drift        empirical_offset    log(var of frame means / half their mean square successive
                                             difference), darks and flats (a level drifting over frames)
+dark_frame_jitter       empirical_offset    var of dark frame means / what rows, columns and pixels put
+                                            there, - 1 (a black level moving from frame to frame)
 dark_tail_mass          heavy_tail_read     fraction of dark residuals beyond 4 IQR-sigma
 dark_ppcc_lambda        heavy_tail_read     Tukey-lambda shape maximising the PPCC of dark residuals
 code_occupancy          quantization        used / possible integer codes in the central 98 % of darks
@@ -90,14 +92,14 @@ PLANE_OFFSETS = ((0, 0), (0, 1), (1, 0), (1, 1))
 
 #: The battery, in report order. The effect each one proposes is on the effect's card
 #: (``EffectCard.diagnostics``, :mod:`simcam.calibration.effects`); a diagnostic no card claims
-#: (``dark_checker_jitter``) proposes none; ``col_temporal_excess``, ``frame_mean_drift``, ``col_fpn_spectrum_peak``
-#: and ``row_mean_lag1`` propose empirical components.
+#: (``dark_checker_jitter``) proposes none; ``col_temporal_excess``, ``frame_mean_drift``, ``dark_frame_jitter``,
+#: ``col_fpn_spectrum_peak`` and ``row_mean_lag1`` propose empirical components.
 DIAGNOSTICS = (
     "ptc_curvature", "plane_gain_spread", "row_mean_excess", "row_spectrum_peak", "col_spectrum_peak",
     "col_temporal_excess", "row_mean_lag1", "dark_checker_jitter", "col_fpn_excess", "col_fpn_spectrum_peak", "dsnu_excess",
     "hot_pixel_tail", "prnu_excess",
     "black_offset", "dark_signal_slope", "dark_variance_slope", "frame_mean_jitter", "frame_mean_drift",
-    "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "lag1_corr",
+    "dark_frame_jitter", "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "lag1_corr",
     "lag2_corr", "defect_pixels", "glow_field",
     "telegraph_pixels", "code_width_spread", "adjacent_corr", "flat_adjacent_corr", "frame_spectrum_peak",
 )
@@ -134,6 +136,7 @@ NEEDS = {
     "dark_signal_slope": "needs darks at >= 2 exposure times",
     "frame_mean_jitter": "needs a flat sequence",
     "frame_mean_drift": "needs a dark or flat sequence of >= 4 frames",
+    "dark_frame_jitter": "needs a dark sequence",
     "dark_variance_slope": "needs darks of >= 2 frames at >= 2 exposure times",
     "dark_tail_mass": "needs a dark sequence",
     "dark_ppcc_lambda": "needs a dark sequence",
@@ -411,15 +414,57 @@ def _line_means(which: str, axis: int, d: CaptureData) -> list[np.ndarray]:
     return d.cache[key]
 
 
+def _residual_vars(d: CaptureData) -> list[float]:
+    """The variance of each temporal residual of ``temporal_residuals("all")`` (the darks' first), computed once."""
+    if "rvar" not in d.cache:
+        d.cache["rvar"] = [float(np.var(r)) for r in d.temporal_residuals("all")]
+    return d.cache["rvar"]
+
+
 def _excess(d: CaptureData, axis: int):
     res = d.temporal_residuals("all")
     if not res:
         return None
     lm = _line_means("all", axis, d)
     vals = []
-    for r, m in zip(res, lm):
+    for r, m, v in zip(res, lm, _residual_vars(d)):
         npx = r.shape[axis]
-        vals.append(_ratio(np.var(m, axis=1).mean(), np.var(r) / npx, "the temporal residual's variance"))
+        vals.append(_ratio(np.var(m, axis=1).mean(), v / npx, "the temporal residual's variance"))
+    return float(np.mean(vals))
+
+
+def dark_frame_levels(d: CaptureData) -> list[tuple[np.ndarray, float]]:
+    """Per dark sequence of >= 3 frames: its frames' means of the temporal residual (about the sequence's
+    mean, unit-variance preserving: their mean square is the frame level's variance) and what the rows,
+    columns and pixels put into one frame mean, ``var(row means) / H + var(column means) / W - var / (H W)``
+    (each line's means about the frame's mean, averaged over the frames; the pixels' share is in both line
+    terms, so it is taken off once). The row and column means are those ``row_mean_excess`` and
+    ``col_temporal_excess`` take (:func:`_line_means`)."""
+    if "dframes" not in d.cache:
+        out = []
+        darks = d.temporal_residuals("dark")
+        if darks:
+            rows, cols, var = _line_means("all", 2, d), _line_means("all", 1, d), _residual_vars(d)
+            for r, rm, cm, v in zip(darks, rows, cols, var):  # the darks come first in "all"
+                n, h, w = r.shape
+                if n < 3:
+                    continue
+                white = float(np.var(rm, axis=1).mean()) / h + float(np.var(cm, axis=1).mean()) / w - v / (h * w)
+                out.append((rm.mean(axis=1), white))
+        d.cache["dframes"] = out
+    return d.cache["dframes"]
+
+
+def dark_frame_jitter(d: CaptureData):
+    """The dark frames' level variance over what the rows, columns and pixels put there, less 1, averaged
+    over the dark sequences (:func:`dark_frame_levels`): 0 when a frame's level moves only by its own
+    noise, positive for a black level that moves from frame to frame (a clamp or reference that wanders;
+    in the darks, so not flicker, which needs light)."""
+    if not d.darks:
+        return None
+    vals = [float(np.mean(fm * fm)) / white - 1.0 for fm, white in dark_frame_levels(d) if white > 0]
+    if not vals:
+        raise NotApplicable("no dark sequence of >= 3 frames with a temporal noise")
     return float(np.mean(vals))
 
 

@@ -74,7 +74,7 @@ FAMILY_DIAGNOSTICS = {
     "column": ("col_temporal_excess", "col_fpn_excess", "col_fpn_spectrum_peak", "col_spectrum_peak"),
     "temporal": ("dsnu_excess", "prnu_excess", "hot_pixel_tail", "col_fpn_excess", "col_fpn_spectrum_peak"),
     "block": ("lag1_corr", "lag2_corr", "dark_checker_jitter", "frame_spectrum_peak"),
-    "frame": ("frame_mean_jitter", "frame_mean_drift", "dark_checker_jitter"),
+    "frame": ("frame_mean_jitter", "frame_mean_drift", "dark_frame_jitter", "dark_checker_jitter"),
 }
 
 

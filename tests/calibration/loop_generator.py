@@ -47,6 +47,9 @@ seed eq. 3.6 for the Poisson-Gaussian core)::
 * ``row_wander``: per frame, row offsets that follow a first-order autoregression down the frame
   (``o_i = rho o_(i-1) + sqrt(1 - rho^2) sigma_dn n_i``): coloured row noise, outside the vocabulary
   (``empirical_spectrum``).
+* ``black_wander``: a black level that wanders from frame to frame, a first-order autoregression over
+  the frames of each sequence (``b_f = rho b_(f-1) + sqrt(1 - rho^2) sigma_dn n_f``), the same for every
+  pixel: outside the vocabulary (``empirical_offset``, frame form).
 * ``checker_offset`` N(0, s^2) per frame, added with opposite signs to the 00/11 and the 01/10
   sites (interleaved readout channels, as in the EMVA 1288 CCD data): also outside the vocabulary.
 """
@@ -211,6 +214,14 @@ class HiddenEffectSensor:
         h, w = s.height, s.width
         mu = np.broadcast_to(np.asarray(mu_e, dtype=np.float64), (h, w)) * self.prnu
         out = np.empty((n_frames, h, w), dtype=np.float32)
+        wander = np.zeros(n_frames)
+        if "black_wander" in eff:  # NOT in the vocabulary: a black level wandering over the sequence (AR(1))
+            p = eff["black_wander"]
+            rho = float(p["rho"])
+            wander[0] = rng.normal(0, p["sigma_dn"])
+            kick = rng.normal(0, p["sigma_dn"] * np.sqrt(1 - rho * rho), n_frames)
+            for f in range(1, n_frames):
+                wander[f] = rho * wander[f - 1] + kick[f]
         for f in range(n_frames):
             lam = mu
             if "frame_flicker" in eff:
@@ -257,7 +268,7 @@ class HiddenEffectSensor:
                 x = x + p["amplitude_dn"] * np.sin(2 * np.pi * r / p["period_px"] + rng.uniform(0, 2 * np.pi))
             if "nonlinearity" in eff:
                 x = x + eff["nonlinearity"]["c"] * x ** 2 / (s.white_dn - s.black_dn)
-            v = s.black_dn + eff.get("black_level_offset", {}).get("offset_dn", 0.0) + self.offset + x
+            v = s.black_dn + eff.get("black_level_offset", {}).get("offset_dn", 0.0) + self.offset + x + wander[f]
             q = eff.get("quantization", {}).get("step_dn", 1)
             if self.adc_edges is not None:  # code k spans [edges[k-1], edges[k])
                 out[f] = np.clip(np.searchsorted(self.adc_edges, v, side="right"), 0, s.white_dn)

@@ -175,3 +175,15 @@ def test_a_frame_offset_leaves_the_read_noise_alone():
         m.refit_read()
         reads.append(m.read_dn)
     assert reads[1] == reads[0] and reads[2] < reads[0]
+
+
+def test_dark_frame_jitter_is_zero_for_independent_frames_and_large_for_moving_black():
+    """Without frame offsets each value is a chi-square(n)/n - 1 (n = 16 frames): sd sqrt(2/16) = 0.35, so
+    the mean of 20 draws is 0 within 3 x 0.08; a 1-DN frame offset against a frame-mean noise of
+    2^2 / 4096 DN^2 is ~1000."""
+    rng = np.random.default_rng(14)
+    vals = [dg.dark_frame_jitter(capture([frames(rng, 16)], [])) for _ in range(20)]
+    assert abs(np.mean(vals)) < 3 * np.sqrt(2 / 16) / np.sqrt(20)
+    moving = dg.dark_frame_jitter(capture([frames(rng, 16, offsets=rng.normal(0, 1.0, 16))], []))
+    assert moving > 100
+    assert dg.statistic("dark_frame_jitter", capture([], [frames(rng, 4, 500.0)]))[0] is None

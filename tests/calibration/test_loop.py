@@ -264,6 +264,23 @@ def test_wandering_row_offsets_get_their_measured_spectrum_not_row_noise():
     assert variance_dn2(r.model.effects["empirical_spectrum"]) == pytest.approx(4.0, rel=3 * 0.22)
 
 
+def test_a_wandering_black_level_gets_the_frame_offset_not_flicker():
+    """A black level that wanders from frame to frame (the generator's black_wander: an AR(1) over each
+    sequence's frames, sd 2 DN, lag-1 correlation 0.7; in darks and flats alike) moves the flats' frame
+    means as flicker does, but flicker needs light: the darks' frame levels (dark_frame_jitter) tell them
+    apart, and the loop adds the frame form of empirical_offset (frame, temporal, additive), not
+    frame_flicker. Its variance is not checked: 6 fit frames of one dark sequence (5 degrees of freedom,
+    relative SE 63 %, and an AR(1)'s slow part goes into the sequence's mean)."""
+    from loop_matrix import in_memory_capture
+    from simcam.calibration.loop import LoopConfig, run_loop
+
+    effects = {"black_wander": {"sigma_dn": 2.0, "rho": 0.7}}
+    r = run_loop(in_memory_capture(capture_set(SensorSpec(effects=effects))), LoopConfig())[0]
+    assert set(r.model.effects) == {"empirical_offset"} and r.model.effects["empirical_offset"].axis == "frame"
+    it = next(i for i in r.iterations if i["accepted"] and i["effect"] == "empirical_offset")
+    assert it["not_in_vocabulary"].startswith("frame, temporal, additive")
+
+
 def test_checkerboard_frame_offset_outside_the_vocabulary_is_reported_unexplained():
     # a per-frame offset of opposite sign on the 00/11 and 01/10 sites (seen on the EMVA 1288 CCD
     # darks): no effect of the vocabulary makes it, so it must be reported, not forced into one.

@@ -20,24 +20,27 @@ probabilities 0, 1/32, ..., 1) of the column means, centred and shrunk towards t
 Gaussian), so a skewed or heavy-tailed column noise keeps its shape.
 
 Frame form (``axis: frame``). A black level that wanders from frame to frame (a clamp or reference that
-settles with die temperature, a supply that drifts) moves every pixel of a frame alike; none of the named
-effects does (``frame_flicker`` is a gain on the light: darks do not show it). ``frame_mean_drift`` (the
-frame means of a sequence varying more slowly than independent frames would: the inverse of von
-Neumann's ratio, J. von Neumann, *Ann. Math. Statist.* 12, 1941) proposes it. Fit from the darks only
-(an offset is present in them; a drifting *gain* shows in the flats alone and leaves this fit null): each
-dark sequence's frame means of the temporal residual; their variance is the offset's s^2 plus what the
-rows, columns and pixels put there, ``var(row means) / H + var(column means) / W - var(pixels) / (H W)``
-per frame (each line's mean of the frame's residual about the frame's mean; the pixel part is in both
-terms once), scaled by n / (n - 1) (residuals about the sequence's temporal mean). The law is the
-measured one as above (33 quantiles of the frame means, shrunk by ``s / sd``). The noise stage draws the
-offset independently every frame: it reproduces the spread of the frame levels, not their order (a
-drift's ramp is a sequence, which a per-frame draw does not have), so ``frame_mean_drift`` itself stays
-unexplained. A level that drifts with temperature also sits higher in longer darks (self-heating): with
-darks at two exposure times or more the form keeps the dark level's rise per second that the model's
-``dark_current`` does not make (its ``non_poisson_dn_per_s``, the rise the dark variance does not follow;
-without dark current the whole rise), when beyond 3 standard errors (``rate_dn_per_s``, added to every
-pixel as ``rate x t``, no shot noise); it is refitted when ``dark_current`` joins. A model holds one
-``empirical_offset``: column or frame.
+settles with die temperature, a supply that drifts) moves every pixel of a frame alike; none of the
+named effects does (``frame_flicker`` is a gain on the light: darks do not show it).
+``frame_mean_drift`` (the frame means of a sequence varying more slowly than independent frames would:
+the inverse of von Neumann's ratio, J. von Neumann, *Ann. Math. Statist.* 12, 1941) proposes it, and so
+does ``dark_frame_jitter`` (the dark frames' levels varying more than their own noise allows, in any
+order). Fit from the darks only (an offset is present in them; a drifting *gain* shows in the flats
+alone and leaves this fit null): each dark sequence's frame means of the temporal residual
+(``diagnostics.dark_frame_levels``); their variance is the offset's s^2 plus what the rows, columns and
+pixels put there, ``var(row means) / H + var(column means) / W - var(pixels) / (H W)`` per frame (each
+line's mean of the frame's residual about the frame's mean; the pixel part is in both terms once). The
+law is the measured one as above (33 quantiles of the frame means, shrunk by ``s / sd``). It is weighed
+against ``frame_flicker`` on the held-out frames: flicker moves the flats' levels in proportion to their
+signal and leaves the darks alone. The noise stage draws the offset independently every frame: it
+reproduces the spread of the frame levels, not their order (a drift's ramp is a sequence, which a
+per-frame draw does not have), so ``frame_mean_drift`` itself stays unexplained. A level that drifts with
+temperature also sits higher in longer darks (self-heating): with darks at two exposure times or more
+the form keeps the dark level's rise per second that the model's ``dark_current`` does not make (its
+``non_poisson_dn_per_s``, the rise the dark variance does not follow; without dark current the whole
+rise), when beyond 3 standard errors (``rate_dn_per_s``, added to every pixel as ``rate x t``, no shot
+noise); it is refitted when ``dark_current`` joins. A model holds one ``empirical_offset``: column or
+frame.
 
 Profile. The noise stage's ``{type: empirical_offset, axis: column | frame, temporal: true, quantiles}``
 (quantiles on normalised raw; drawn by inverse transform every frame), with ``rate`` (normalised raw per
@@ -80,14 +83,14 @@ FAMILIES = {"column": "column, temporal, additive (present in darks), not exposu
 
 
 class EmpiricalOffsetCard(EffectCard, name="empirical_offset", params=EmpiricalOffset,
-                          diagnostics=("col_temporal_excess", "frame_mean_drift"), gaussian=False,
+                          diagnostics=("col_temporal_excess", "frame_mean_drift", "dark_frame_jitter"), gaussian=False,
                           family=FAMILIES["column"], refit_after=("dark_current",)):
 
     def variants(self, proposed_by):
-        # one candidate per form the proposals point to: the frame form from frame_mean_drift
+        # one candidate per form the proposals point to: the frame form from the frame statistics
         out, forms = [], set()
         for p in proposed_by:
-            form = "frame" if p.name == "frame_mean_drift" else "column"
+            form = "frame" if p.name in ("frame_mean_drift", "dark_frame_jitter") else "column"
             if form not in forms:
                 forms.add(form)
                 out.append((p, "frame") if form == "frame" else p)
@@ -193,22 +196,13 @@ def _exposure_rate(d, model) -> float:
 
 
 def _fit_frame(d, model) -> EmpiricalOffset:
-    """The frame form's fit from the dark sequences of >= 4 frames (module docstring); null without them."""
+    """The frame form's fit from the dark sequences of >= 3 frames (module docstring); null without them."""
+    from .. import diagnostics as dg
+
     rate = _exposure_rate(d, model)
-    means, excess = [], []
-    for r in d.temporal_residuals("dark"):
-        n, h, w = r.shape
-        if n < 4:
-            continue
-        fm = r.mean(axis=(1, 2))  # (n,) frame means of the residual (they sum to 0 over the sequence)
-        white = 0.0
-        for f in r:
-            rm = f.mean(axis=1)
-            cm = f.mean(axis=0)
-            white += float(np.var(rm)) / h + float(np.var(cm)) / w - float(np.var(f)) / (h * w)
-        white *= 1.0 / (n - 1)  # mean over n frames, times n / (n - 1)
-        means.append(fm - fm.mean())
-        excess.append(float(np.sum(fm * fm)) / (n - 1) - white)
+    levels = dg.dark_frame_levels(d)
+    means = [fm for fm, _white in levels]
+    excess = [float(np.mean(fm * fm)) - white for fm, white in levels]
     if not means:
         return EmpiricalOffset(quantiles_dn=[0.0] * N_QUANTILES, axis="frame", rate_dn_per_s=rate)
     return EmpiricalOffset(quantiles_dn=_shrunk_quantiles(np.concatenate(means), max(float(np.mean(excess)), 0.0)),
