@@ -34,13 +34,13 @@ law is the measured one as above (33 quantiles of the frame means, shrunk by ``s
 against ``frame_flicker`` on the held-out frames: flicker moves the flats' levels in proportion to their
 signal and leaves the darks alone. The noise stage draws the offset independently every frame: it
 reproduces the spread of the frame levels, not their order (a drift's ramp is a sequence, which a
-per-frame draw does not have), so ``frame_mean_drift`` itself stays unexplained. A level that drifts with
-temperature also sits higher in longer darks (self-heating): with darks at two exposure times or more
-the form keeps the dark level's rise per second that the model's ``dark_current`` does not make (its
-``non_poisson_dn_per_s``, the rise the dark variance does not follow; without dark current the whole
-rise), when beyond 3 standard errors (``rate_dn_per_s``, added to every pixel as ``rate x t``, no shot
-noise); it is refitted when ``dark_current`` joins. A model holds one ``empirical_offset``: column or
-frame.
+per-frame draw does not have), so ``frame_mean_drift`` itself stays unexplained. A level that drifts
+with temperature also sits higher in longer darks (self-heating): with darks at two exposure times or
+more the form keeps the dark level's rise per second that the model's ``dark_current`` does not make
+(its ``non_poisson_dn_per_s``, the rise the dark variance does not follow; without dark current the
+whole rise; less the model's ``amp_glow``), when beyond 3 standard errors (``rate_dn_per_s``, added to
+every pixel as ``rate x t``, no shot noise); it is refitted when ``dark_current`` or ``amp_glow`` joins.
+A model holds one ``empirical_offset``: column or frame.
 
 Profile. The noise stage's ``{type: empirical_offset, axis: column | frame, temporal: true, quantiles}``
 (quantiles on normalised raw; drawn by inverse transform every frame), with ``rate`` (normalised raw per
@@ -76,6 +76,8 @@ class EmpiricalOffset(EffectParams):
                                     "noise (frame form)", default=0.0)
 
 
+#: the card's forms (``FitContext.form``): what the offset is shared by
+FORMS = ("column", "frame")
 #: the residual family of each form (the report's "not in the vocabulary" line)
 FAMILIES = {"column": "column, temporal, additive (present in darks), not exposure-dependent",
             "frame": "frame, temporal, additive (present in darks), not exposure-dependent",
@@ -84,7 +86,7 @@ FAMILIES = {"column": "column, temporal, additive (present in darks), not exposu
 
 class EmpiricalOffsetCard(EffectCard, name="empirical_offset", params=EmpiricalOffset,
                           diagnostics=("col_temporal_excess", "frame_mean_drift", "dark_frame_jitter"), gaussian=False,
-                          family=FAMILIES["column"], refit_after=("dark_current",)):
+                          family=FAMILIES["column"], refit_after=("dark_current", "amp_glow")):
 
     def variants(self, proposed_by):
         # one candidate per form the proposals point to: the frame form from the frame statistics
@@ -93,7 +95,7 @@ class EmpiricalOffsetCard(EffectCard, name="empirical_offset", params=EmpiricalO
             form = "frame" if p.name in ("frame_mean_drift", "dark_frame_jitter") else "column"
             if form not in forms:
                 forms.add(form)
-                out.append((p, "frame") if form == "frame" else p)
+                out.append((p, form))
         return out
 
     def family_of(self, p):
@@ -102,7 +104,11 @@ class EmpiricalOffsetCard(EffectCard, name="empirical_offset", params=EmpiricalO
         return FAMILIES.get(p.axis, self.family)
 
     def fit(self, d, model, ctx):
-        if ctx.form == "frame":
+        form = ctx.form
+        if form not in FORMS:  # a refit beside another effect (whose form ctx carries): keep the model's
+            held = model.effects.get(self.name)
+            form = held.axis if held is not None else "column"
+        if form == "frame":
             return _fit_frame(d, model)
         res = d.temporal_residuals("dark") or d.temporal_residuals("flat")
         means, excess = [], []
@@ -179,7 +185,9 @@ def _exposure_rate(d, model) -> float:
     them, or with darks at fewer than 2 exposure times."""
     from scipy import stats as sst
 
-    series = [(float(t), f) for t, f in (d.dark_series or []) if f.shape[0] >= 2]
+    from .dark_current import _without_glow
+
+    series = [(float(t), f) for t, f in _without_glow(d.dark_series or [], model) if f.shape[0] >= 2]
     if len({t for t, _ in series}) < 2:
         return 0.0
     t = np.array([ti for ti, _ in series])
