@@ -187,3 +187,20 @@ def test_dark_frame_jitter_is_zero_for_independent_frames_and_large_for_moving_b
     moving = dg.dark_frame_jitter(capture([frames(rng, 16, offsets=rng.normal(0, 1.0, 16))], []))
     assert moving > 100
     assert dg.statistic("dark_frame_jitter", capture([], [frames(rng, 4, 500.0)]))[0] is None
+
+
+def test_the_frame_form_stays_the_frame_form_when_dark_current_joins():
+    """``dark_current`` joining refits the frame form (its rate is the rise dark current leaves); the refit
+    runs with the joining effect's fit context, and must keep the model's form (it became the column form)."""
+    from simcam.calibration.effects import FitContext
+    from simcam.calibration.effects.empirical_offset import EmpiricalOffset
+    from simcam.calibration.fit import fit_effect
+    from simcam.calibration.model import LoopModel
+
+    rng = np.random.default_rng(15)
+    s = [(t, frames(rng, 12, offsets=rng.normal(0, 1.0, 12))) for t in (0.02, 2.0)]
+    d = dg.CaptureData([s[0][1]], [], [], np.full((2, 2), BLACK), WHITE, "RGGB", dark_series=s)
+    m = LoopModel("RGGB", np.full((2, 2), BLACK), WHITE, K, READ, READ ** 2 + 1 / 12,
+                  effects={"empirical_offset": EmpiricalOffset(quantiles_dn=list(np.linspace(-1, 1, 33)), axis="frame")})
+    m2 = fit_effect("dark_current", d, m, FitContext(diagnostic="dark_signal_slope"))
+    assert m2.effects["empirical_offset"].axis == "frame"
