@@ -599,21 +599,39 @@ class Loop:
                 if cur.done < 2 * R:
                     held_cur.update(cur.extend(2 * R).result())
                 self._score(rec, run.extend(2 * R), held_cur)
-        out = []
-        for rec, cand, run in runs:
-            held = run.result()
-            worse = error_grew(held, held_cur, self.cfg.kl_tolerance)
-            kl_ok = worse is None
-            beats = rec.pop("_beats") and "left_race" not in rec
-            broken = self._broken(held, held_cur)
-            if broken:
-                rec["breaks"] = broken
-            if worse:
-                rec["error_grew"] = worse
-            rec.update({"kl_before": held_cur["kl"], "kl_after": held["kl"], "kl_ok": kl_ok,
-                        "kl_structured_after": held["kl_structured"],
-                        "beats_current": bool(beats and kl_ok and not broken)})
-            out.append((rec, cand, held))
+
+        def judged(items):
+            out = []
+            for rec, cand, run in items:
+                held = run.result()
+                worse = error_grew(held, held_cur, self.cfg.kl_tolerance)
+                kl_ok = worse is None
+                beats = rec.pop("_beats") and "left_race" not in rec
+                broken = self._broken(held, held_cur)
+                if broken:
+                    rec["breaks"] = broken
+                if worse:
+                    rec["error_grew"] = worse
+                rec.update({"kl_before": held_cur["kl"], "kl_after": held["kl"], "kl_ok": kl_ok,
+                            "kl_structured_after": held["kl_structured"],
+                            "beats_current": bool(beats and kl_ok and not broken)})
+                out.append((rec, cand, held))
+            return out
+
+        out = judged(runs)
+        # a leader refuted on the held-out frames (it breaks a statistic the current model reproduces, or the
+        # held-out error grows) must not have sent the others out of the race: where none of those that
+        # stayed beats the current model and one of them is refuted, those that left behind a candidate get
+        # the full replicates and are judged again
+        stayed = [rec for rec, _c, _h in out if "left_race" not in rec]
+        if stayed and not any(r["beats_current"] for r in stayed) and any(r.get("breaks") or not r["kl_ok"]
+                                                                           for r in stayed):
+            again = [t for t in runs if "nats behind" in t[0].get("left_race", "")]
+            for rec, _cand, run in again:
+                rec["raced_again"] = rec.pop("left_race") + "; raced again: the candidates ahead were refuted"
+                self._score(rec, run.extend(R), held_cur)
+            redo = {id(t[0]) for t in again}
+            out = [t for t in out if id(t[0]) not in redo] + judged(again)
         return out
 
     def _broken(self, held: dict, held_cur: dict) -> list[dict]:

@@ -135,3 +135,45 @@ def test_the_race_compares_within_each_stage(monkeypatch):
     assert recs["heavy_tail_read"]["left_race"] == "100 nats behind dead_pixels after 4 replicates"
     assert recs["dsnu"]["left_race"] == "20 nats behind dead_pixels after 8 replicates"
     assert recs["dsnu"]["replicates"] == 8 and recs["heavy_tail_read"]["replicates"] == 4
+
+
+def test_a_refuted_leader_does_not_keep_the_others_out(monkeypatch):
+    """The race leader (the independent simulator's black drift beside a black offset, seed 2028: the frame
+    offset, 147 nats) is refuted on the held-out frames (it breaks a statistic the current model reproduces);
+    the black-level offset had left the race 43 nats behind it after 4 replicates, and nothing was added. A
+    candidate that left behind a refuted leader is raced again on the full replicates and judged (a weak one
+    then still does not beat the current model)."""
+    import simcam.calibration.loop as loop_mod
+
+    class Run:
+        def __init__(self, loop, model, diagnostics=(), label=""):
+            self.model, self.done = model, 0
+
+        def extend(self, upto):
+            self.done = max(self.done, upto)
+            return self
+
+        def result(self):
+            return {"structured": {}, "kl_structured": 0.0, "kl_structured_sd": 0.0, "kl": 0.0, "m": self.model}
+
+    def score(self, rec, run, held_cur):
+        rec.update(heldout_gain=run.model[run.done], heldout_gain_sd=1.0, replicates=run.done,
+                   _beats=run.model[run.done] > 5.0)
+
+    lead = {4: 147.0, 8: 150.0, 12: 152.0}
+    broken = lambda self, held, cur: [{"diagnostic": "row_mean_lag1"}] if held["m"] is lead else []  # noqa: E731
+    monkeypatch.setattr(loop_mod, "HeldOut", Run)
+    monkeypatch.setattr(Loop, "_score", score)
+    monkeypatch.setattr(Loop, "_broken", broken)
+    loop = SimpleNamespace(cfg=LoopConfig(heldout_replicates=12), applicable=[], _score=lambda *a: score(None, *a),
+                           _broken=lambda *a: broken(None, *a))
+    offset, weak = {4: 104.0, 8: 110.0, 12: 118.0}, {4: -20.0, 8: -20.0, 12: -20.0}
+    fitted = [({"effect": "empirical_offset"}, lead), ({"effect": "black_level_offset"}, offset),
+              ({"effect": "dark_current"}, weak)]
+    out = Loop._race(loop, fitted, {"structured": {}, "kl_structured": 0.0, "kl_structured_sd": 0.0, "kl": 0.0})
+    recs = {r["effect"]: r for r, _m, _h in out}
+    assert recs["empirical_offset"]["breaks"] and not recs["empirical_offset"]["beats_current"]
+    b = recs["black_level_offset"]
+    assert "left_race" not in b and b["raced_again"].startswith("43 nats behind empirical_offset after 4 replicates")
+    assert b["replicates"] == 12 and b["beats_current"]
+    assert "raced_again" in recs["dark_current"] and not recs["dark_current"]["beats_current"]
