@@ -687,13 +687,16 @@ def _candidates_table(iterations: list[dict]) -> str:
             verdict = (f"no (left the race: {html.escape(c['left_race'])})" if c.get("left_race") else
                        f"no (breaks {html.escape(breaks)})" if breaks else
                        f"no (held-out error grew: {html.escape(c['error_grew'])})" if c.get("error_grew") else "no")
+            again = (f" (raced again: it had left {html.escape(c['raced_again'].split(';')[0])})"
+                     if c.get("raced_again") else "")  # behind a leader that was then refuted
             several = len(c["proposed_by"]) > 1 and c.get("fitted_from")
             name = c["effect"] + (f" ({c['form']})" if c.get("form") else "") + (
                 f" (fitted from {c['fitted_from']})" if several else "")
             rows.append(f"<tr><td>{i}</td><td class=l>{name}</td><td class=l>{', '.join(c['proposed_by'])}</td>"
                         f"<td>{_fmt(c['heldout_gain'])}</td><td>{_fmt(c['heldout_gain_sd'])}</td>"
                         f"<td>{c.get('replicates', '')}</td><td class=l>{html.escape(moved)}</td><td>{_fmt(c['kl_after'])}</td>"
-                        f"<td>{_fmt(c.get('kl_structured_after'))}</td><td>{'yes' if c['beats_current'] else verdict}</td>"
+                        f"<td>{_fmt(c.get('kl_structured_after'))}</td>"
+                        f"<td>{('yes' if c['beats_current'] else verdict) + again}</td>"
                         f"<td>{chosen}</td></tr>")
     rows.append("</table>")
     return "".join(rows)
