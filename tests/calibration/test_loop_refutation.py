@@ -99,6 +99,21 @@ def test_tied_candidates_go_to_the_one_the_strongest_residual_proposed():
     assert Loop._break_tie(SimpleNamespace(preferred=set()), dead, [dead, hot], sig) is dead
 
 
+class _Run:
+    """A candidate's held-out replicates for the race tests: its gain after n of them is ``model[n]``; its
+    result carries the model (``m``) so that a fake ``_broken`` can tell candidates apart."""
+
+    def __init__(self, loop, model, diagnostics=(), label=""):
+        self.model, self.done = model, 0
+
+    def extend(self, upto):
+        self.done = max(self.done, upto)
+        return self
+
+    def result(self):
+        return {"structured": {}, "kl_structured": 0.0, "kl_structured_sd": 0.0, "kl": 0.0, "m": self.model}
+
+
 def test_the_race_compares_within_each_stage(monkeypatch):
     """A candidate leaves the race when it is far behind the leader after a stage of replicates (4, then
     8), judged on the leader's gain from the same stage even when the leader, first in the list, has
@@ -106,21 +121,10 @@ def test_the_race_compares_within_each_stage(monkeypatch):
     stuck-pixel and a hot-pixel candidate at 115 nats each after 4 replicates, 186 and 185 after 12)."""
     import simcam.calibration.loop as loop_mod
 
-    class Run:  # a candidate's held-out replicates: its gain after n of them is model[n]
-        def __init__(self, loop, model, diagnostics=(), label=""):
-            self.model, self.done = model, 0
-
-        def extend(self, upto):
-            self.done = max(self.done, upto)
-            return self
-
-        def result(self):
-            return {"structured": {}, "kl_structured": 0.0, "kl_structured_sd": 0.0, "kl": 0.0}
-
     def score(self, rec, run, held_cur):
         rec.update(heldout_gain=run.model[run.done], heldout_gain_sd=0.8, replicates=run.done, _beats=True)
 
-    monkeypatch.setattr(loop_mod, "HeldOut", Run)
+    monkeypatch.setattr(loop_mod, "HeldOut", _Run)
     monkeypatch.setattr(Loop, "_score", score)
     monkeypatch.setattr(Loop, "_broken", lambda self, held, cur: [])
     loop = SimpleNamespace(cfg=LoopConfig(heldout_replicates=12), applicable=[], _score=lambda *a: score(None, *a),
@@ -145,24 +149,13 @@ def test_a_refuted_leader_does_not_keep_the_others_out(monkeypatch):
     then still does not beat the current model)."""
     import simcam.calibration.loop as loop_mod
 
-    class Run:
-        def __init__(self, loop, model, diagnostics=(), label=""):
-            self.model, self.done = model, 0
-
-        def extend(self, upto):
-            self.done = max(self.done, upto)
-            return self
-
-        def result(self):
-            return {"structured": {}, "kl_structured": 0.0, "kl_structured_sd": 0.0, "kl": 0.0, "m": self.model}
-
     def score(self, rec, run, held_cur):
         rec.update(heldout_gain=run.model[run.done], heldout_gain_sd=1.0, replicates=run.done,
                    _beats=run.model[run.done] > 5.0)
 
     lead = {4: 147.0, 8: 150.0, 12: 152.0}
     broken = lambda self, held, cur: [{"diagnostic": "row_mean_lag1"}] if held["m"] is lead else []  # noqa: E731
-    monkeypatch.setattr(loop_mod, "HeldOut", Run)
+    monkeypatch.setattr(loop_mod, "HeldOut", _Run)
     monkeypatch.setattr(Loop, "_score", score)
     monkeypatch.setattr(Loop, "_broken", broken)
     loop = SimpleNamespace(cfg=LoopConfig(heldout_replicates=12), applicable=[], _score=lambda *a: score(None, *a),
