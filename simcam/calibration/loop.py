@@ -424,7 +424,8 @@ class Loop:
         self.data_stats = dg.compute_all(group.fit_data, reasons=self.not_applicable)
         self.held_stats = dg.compute_all(group.held_data)
         self.applicable = [k for k, v in self.data_stats.items() if v is not None]
-        self._floors: dict = {}  # diagnostic -> resolution; ("null", diagnostic) -> closed-form count
+        self._floors: dict[str, float] = {}
+        self._nulls: dict[str, float | None] = {}  # diagnostic -> closed-form count (held_null)
         self._data_sides: dict[bytes, tuple] = {}  # digest of the held-out clean levels -> HeldOut's data side
         self.threads = _threads(cfg)
 
@@ -459,10 +460,9 @@ class Loop:
     def held_null(self, name: str) -> float | None:
         """The closed-form count of a pixel-count statistic on the held-out data under a model without its
         effect (:func:`diagnostics.count_null`), or None."""
-        key = ("null", name)
-        if key not in self._floors:
-            self._floors[key] = dg.count_null(name, self.g.held_data)
-        return self._floors[key]
+        if name not in self._nulls:
+            self._nulls[name] = dg.count_null(name, self.g.held_data)
+        return self._nulls[name]
 
     def map(self, fn, items, what: str):
         """``fn`` over ``items`` on :attr:`threads` threads (numpy and the noise kernels release the GIL),
@@ -574,6 +574,7 @@ class Loop:
             run = HeldOut(self, cand, tuple(self.applicable), f"+ {rec['effect']}").extend(stages[0])
             self._score(rec, run, held_cur)
             runs.append((rec, cand, run))
+        behind = set()  # ids of the records that left the race behind a leader (not for a low gain)
         for k, n in enumerate(stages):
             racing = [t for t in runs if "left_race" not in t[0]]
             if k:
@@ -583,10 +584,11 @@ class Loop:
                 break
             lead = max(racing, key=lambda t: t[0]["heldout_gain"])[0]
             for rec, _cand, _run in racing:
-                behind = lead["heldout_gain"] - rec["heldout_gain"]
+                gap = lead["heldout_gain"] - rec["heldout_gain"]
                 # (an SE from a few replicate pairs can come out near 0 by chance: at least RACE_SE_FLOOR nats)
-                if behind > RACE_Z * max(np.hypot(lead["heldout_gain_sd"], rec["heldout_gain_sd"]), RACE_SE_FLOOR):
-                    rec["left_race"] = f"{behind:.3g} nats behind {lead['effect']} after {n} replicates"
+                if gap > RACE_Z * max(np.hypot(lead["heldout_gain_sd"], rec["heldout_gain_sd"]), RACE_SE_FLOOR):
+                    rec["left_race"] = f"{gap:.3g} nats behind {lead['effect']} after {n} replicates"
+                    behind.add(id(rec))
                 elif rec["heldout_gain"] + RACE_Z * max(rec["heldout_gain_sd"], RACE_SE_FLOOR) < MIN_GAIN:
                     rec["left_race"] = f"gain below {MIN_GAIN:g} nats by > {RACE_Z:g} SE after {n} replicates"
         for rec, _cand, run in runs:
@@ -626,7 +628,7 @@ class Loop:
         stayed = [rec for rec, _c, _h in out if "left_race" not in rec]
         if stayed and not any(r["beats_current"] for r in stayed) and any(r.get("breaks") or not r["kl_ok"]
                                                                            for r in stayed):
-            again = [t for t in runs if "nats behind" in t[0].get("left_race", "")]
+            again = [t for t in runs if id(t[0]) in behind]
             for rec, _cand, run in again:
                 rec["raced_again"] = rec.pop("left_race") + "; raced again: the candidates ahead were refuted"
                 self._score(rec, run.extend(R), held_cur)
