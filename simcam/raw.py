@@ -127,11 +127,13 @@ def normalize(frame: RawFrame, *, black_level: float | None = None, white_level:
             f"(max {float(np.max(black))})")
     if cell is not None:  # per-site constants: one full-width row pattern per cell row, no H x W map
         (h, w), (r, c) = data.shape, cell.shape
-        data = np.asarray(data, dtype=np.float32)
+        data = np.asarray(data)
+        if data.dtype not in (np.uint8, np.uint16, np.float32):  # exact in float32: cast inside the subtraction
+            data = data.astype(np.float32)
         black_rows, scale_rows = np.tile(cell, (1, w // c)), np.tile(scale, (1, w // c))
         out = np.empty((h, w), dtype=np.float32)
-        for i in range(r):  # contiguous rows: SIMD inner loops
-            np.subtract(data[i::r], black_rows[i], out=out[i::r])
+        for i in range(r):  # contiguous rows: SIMD inner loops, no float32 copy of the DN mosaic
+            np.subtract(data[i::r], black_rows[i], out=out[i::r], dtype=np.float32)
             np.divide(out[i::r], scale_rows[i], out=out[i::r])
     else:
         out = (data - black) / scale

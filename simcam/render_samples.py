@@ -10,7 +10,12 @@ when that tail is made only of
 * then at most one ``orientation``.
 
 That tail runs as one parallel pass (:func:`simcam.colour.display_kernel.encode_display`)
-writing the output samples directly; orientation is then a view of them.
+writing the output samples directly; orientation is then a view of them. Where a
+``demosaic`` (bilinear or malvar2004) comes before the tail with only ``crop`` and
+``opcodes`` (list 3) stages between, the demosaic's strips are encoded as they are
+computed (:func:`render_demosaic_tail`): the H x W x 3 float32 image is never
+written and read back (at 12 MP 144 MB of fresh memory, which a new process pays
+for page by page).
 The samples equal the stage-by-stage render's quantised output within one
 code (the transfer curve is read from a table; the matrices are multiplied
 together first).
@@ -109,6 +114,11 @@ def render_samples(pipe, frame: RawFrame, depth: str, *, seed: int | None = None
     usable = fuse and frame.kind == pipe.input_kind
     start = fusable_tail(stages) if usable else len(stages)
     if start < len(stages):
+        k = streamed_demosaic(stages, start)
+        if k < start:
+            head = _head(pipe, k)
+            frame = head(frame, seed=seed, index=index, progress=progress) if head is not None else frame
+            return _done(render_demosaic_tail(stages[k:start], stages[start:], frame, depth), stages[k:], progress)
         head = _head(pipe, start)
         frame = head(frame, seed=seed, index=index, progress=progress) if head is not None else frame
         return _done(render_tail(stages[start:], frame, depth), stages[start:], progress)
@@ -195,16 +205,110 @@ def _head(pipe, start: int):
     return Pipeline(pipe.stages[:start], input_kind=pipe.input_kind, name=pipe.name, source=pipe.source)
 
 
+def streamed_demosaic(stages, start: int) -> int:
+    """Index of a ``demosaic`` stage whose strips can stream into the fused tail at ``start``: a
+    method with a strip sink (:attr:`simcam.stages.demosaic.Demosaic.STREAMING`) followed only by
+    ``crop`` and ``opcodes`` (list 3) stages; ``start`` if there is none."""
+    k = start
+    while k and (stages[k - 1].type == "crop" or (stages[k - 1].type == "opcodes" and stages[k - 1].params.list == 3)):
+        k -= 1
+    if k and stages[k - 1].type == "demosaic" and stages[k - 1].params.method in stages[k - 1].STREAMING:
+        return k - 1
+    return start
+
+
+def render_demosaic_tail(middle, tail, frame: RawFrame, depth: str) -> Rendered:
+    """Demosaic straight into the fused display tail: each strip of the demosaic is encoded to output
+    samples while it is in cache (:func:`simcam.colour.display_kernel.display_encoder`), so the
+    H x W x 3 float32 image (144 MB at 12 MP) is never written and read back.
+
+    ``middle`` is the demosaic stage and the ``crop`` / ``opcodes`` stages after it
+    (:func:`streamed_demosaic`), ``tail`` the fusable tail. The crops act on the strips' rows and
+    columns (their checks and metadata from :meth:`simcam.stages.raw.Crop.plan`). A list-3 opcode
+    list the file holds needs the whole image: the stages then run one by one, as they do elsewhere.
+    The samples are those of :func:`render_tail` on the stage-by-stage frame, byte for byte (the same
+    kernels on the same pixels).
+    """
+    from .colour.display_kernel import display_encoder, sample_dtype
+    from .errors import ImageIOError
+
+    demosaic = middle[0]
+    demosaic.check_input(frame)
+    if any(st.type == "opcodes" and getattr(frame.meta, f"opcode_list{st.params.list}") for st in middle[1:]):
+        for st in middle:
+            frame = st(frame)
+        return render_tail(tail, frame, depth)
+    kind = demosaic.output_kind(frame.kind)
+    h, w = frame.data.shape
+    top, left, bottom, right = 0, 0, h, w
+    meta = frame.meta
+    for st in middle[1:]:
+        if st.type == "crop":  # a stand-in frame of the current size: the crop's checks without pixels
+            proxy = RawFrame(np.broadcast_to(np.zeros((1, 1, 3), np.float32), (bottom - top, right - left, 3)), meta,
+                             kind=kind)
+            st.check_input(proxy)
+            (t, l, b, r), meta = st.plan(proxy)
+            top, left, bottom, right = top + t, left + l, top + b, left + r
+    plan = _tail_plan(tail, kind, meta)
+    out = np.empty((bottom - top, right - left, 3), sample_dtype(depth))
+    try:
+        encode = display_encoder(plan.matrix, lo=plan.lo, hi=plan.hi, curve=plan.curve, depth=depth)
+    except ValueError as exc:
+        raise ImageIOError(f"{meta.source or 'frame'}: {exc}") from None
+
+    def sink(y0: int, y1: int, block: np.ndarray) -> bool:
+        a, z = max(y0, top), min(y1, bottom)
+        return a < z and encode(block[a - y0:z - y0, left:right], out[a - top:z - top])
+
+    if demosaic.stream(frame, sink=sink):
+        raise ImageIOError(f"{meta.source or 'frame'}: image data contains NaN or infinite values")
+    return _oriented(out, plan, meta, depth)
+
+
+@dataclass
+class _TailPlan:
+    """What a fusable tail does: one matrix, the clip bounds, the transfer curve, an orientation."""
+
+    matrix: np.ndarray
+    lo: float | None
+    hi: float | None
+    curve: str
+    kind: str
+    orientation: object
+
+
 def render_tail(tail, frame: RawFrame, depth: str) -> Rendered:
     """Run a fusable tail (``stages[fusable_tail(stages):]``) on ``frame`` in one pass; ``depth`` samples."""
-    from .colour.display import sidd_xyz_to_srgb_matrix, xyz_d50_to_linear_srgb_matrix
     from .colour.display_kernel import encode_display
     from .errors import ImageIOError
+
+    plan = _tail_plan(tail, frame.kind, frame.meta)
+    try:
+        samples = encode_display(frame.data, plan.matrix, lo=plan.lo, hi=plan.hi, curve=plan.curve, depth=depth)
+    except ValueError as exc:
+        raise ImageIOError(f"{frame.meta.source or 'frame'}: {exc}") from None
+    return _oriented(samples, plan, frame.meta, depth)
+
+
+def _oriented(samples: np.ndarray, plan: _TailPlan, meta, depth: str) -> Rendered:
+    """The samples turned upright by the tail's orientation stage, if it has one."""
     from .stages.orientation import orient
+
+    if plan.orientation is not None:
+        value = plan.orientation.transform_value(meta)
+        samples = np.ascontiguousarray(orient(samples, value))
+        meta = meta.copy()
+        meta.orientation = 1
+    return Rendered(samples, plan.kind, meta, depth)
+
+
+def _tail_plan(tail, kind: str, meta) -> _TailPlan:
+    """Compose a fusable tail's stages (for frames of ``kind`` with metadata ``meta``)."""
+    from .colour.display import sidd_xyz_to_srgb_matrix, xyz_d50_to_linear_srgb_matrix
 
     m = np.eye(3)
     lo, hi = -np.inf, np.inf
-    curve, kind, meta, orientation = "linear", frame.kind, frame.meta, None
+    curve, orientation = "linear", None
     for st in tail:
         t = st.type
         if t == "camera_to_xyz":
@@ -224,14 +328,4 @@ def render_tail(tail, frame: RawFrame, depth: str) -> Rendered:
             curve, kind = "srgb", "display"
         elif t == "orientation":
             orientation = st
-    try:
-        samples = encode_display(frame.data, m, lo=None if np.isinf(lo) else lo, hi=None if np.isinf(hi) else hi,
-                                 curve=curve, depth=depth)
-    except ValueError as exc:
-        raise ImageIOError(f"{meta.source or 'frame'}: {exc}") from None
-    if orientation is not None:
-        value = orientation.transform_value(meta)
-        samples = np.ascontiguousarray(orient(samples, value))
-        meta = meta.copy()
-        meta.orientation = 1
-    return Rendered(samples, kind, meta, depth)
+    return _TailPlan(m, None if np.isinf(lo) else lo, None if np.isinf(hi) else hi, curve, kind, orientation)

@@ -178,3 +178,79 @@ def test_render_samples_on_a_raw_pipeline():
     r = render_samples(pipe, frame, "uint16")
     ref = pipe(frame)
     assert r.kind == ref.kind and np.array_equal(r.samples, np.round(np.clip(ref.data, 0, 1) * np.float32(65535)))
+
+
+def _streamed_pipeline(method, rect, orientation=1):
+    return Pipeline.from_dict({"version": 1, "name": "streamed", "stages": [
+        {"type": "normalize"}, {"type": "white_balance", "source": "as_shot"}, {"type": "clip", "low": None, "high": 1.0},
+        {"type": "demosaic", "method": method}, {"type": "opcodes", "list": 3},
+        {"type": "crop", "region": "explicit", "rect": list(rect)},
+        {"type": "camera_to_xyz"}, {"type": "xyz_to_srgb"}, {"type": "clip", "low": 0.0, "high": 1.0},
+        {"type": "gamma", "curve": "srgb"}, {"type": "orientation", "value": orientation}]}, source="<test>")
+
+
+@pytest.mark.parametrize("method", ["malvar2004", "bilinear"])
+@pytest.mark.parametrize("threads", ["1", "2"])
+def test_streamed_demosaic_equals_the_stage_by_stage_frame_byte_for_byte(method, threads, monkeypatch):
+    """The demosaic's strips go straight into the display tail (render_demosaic_tail): the samples are
+    those of the fused tail on the frame the stages make one by one (same kernels, same pixels), for
+    an odd-sized mosaic, a crop at odd offsets cutting strips, orientation, any thread count."""
+    from simcam.frame import RawFrame
+    from simcam.render_samples import render_tail, streamed_demosaic
+
+    monkeypatch.setenv("SIMCAM_THREADS", threads)
+    full = read_dng(EXAMPLE)
+    frame = RawFrame(full.data[:97, :131], full.meta, kind="raw_dn")  # odd height and width
+    pipe = _streamed_pipeline(method, (5, 3, 90, 128), orientation=6)
+    start = fusable_tail(pipe.stages)
+    assert streamed_demosaic(pipe.stages, start) == 3  # the demosaic stage
+    for depth in ("uint8", "uint16", "float32"):
+        got = render_samples(pipe, frame, depth)
+        ref_frame = frame
+        for st in pipe.stages[:start]:
+            ref_frame = st(ref_frame)
+        ref = render_tail(pipe.stages[start:], ref_frame, depth)
+        assert got.samples.dtype == ref.samples.dtype and got.samples.shape == ref.samples.shape == (125, 85, 3)
+        assert got.samples.tobytes() == ref.samples.tobytes()
+        assert got.kind == ref.kind and got.meta.origin == ref.meta.origin and got.meta.orientation == 1
+
+
+def test_streamed_demosaic_errors_and_opcode_fallback():
+    """A NaN in the mosaic is one ImageIOError naming the file; a crop outside the frame is the crop's
+    own StageError; a list-3 opcode list in the file makes the stages run one by one (same samples)."""
+    from simcam.errors import ImageIOError, StageError
+    from simcam.frame import RawFrame
+
+    full = read_dng(EXAMPLE)
+    data = full.data.copy()
+    data[40, 50] = np.nan
+    with pytest.raises(ImageIOError, match="chart.dng: image data contains NaN or infinite values"):
+        render_samples(_streamed_pipeline("malvar2004", (0, 0, 64, 64)), RawFrame(data, full.meta, kind="raw_dn"),
+                       "uint8")
+    with pytest.raises(StageError, match=r"crop \(explicit\) rect \[0, 0, 9999, 64\] is outside"):
+        render_samples(_streamed_pipeline("malvar2004", (0, 0, 9999, 64)), full, "uint8")
+    pipe = _streamed_pipeline("bilinear", (2, 2, 60, 70))
+    plain = render_samples(pipe, full, "uint16")
+    meta = full.meta.copy()
+    meta.opcode_list3 = [object()]  # stands for a list the file holds: the stage would have to apply it
+    seen = []
+
+    class Opcodes3:  # the opcodes stage, run on the whole image (not streamed) and leaving the pixels as they are
+        type = "opcodes"
+
+        def __init__(self, st):
+            self.st, self.params = st, st.params
+
+        def __call__(self, frame, rng=None):
+            seen.append(frame.data.shape)
+            return frame.evolve(step="opcodes3")
+
+        def __getattr__(self, name):
+            return getattr(self.st, name)
+
+    stages = list(pipe.stages)
+    stages[4] = Opcodes3(stages[4])
+    pipe.stages = stages
+    again = render_samples(pipe, RawFrame(full.data, meta, kind="raw_dn"), "uint16")
+    assert seen == [full.data.shape[:2] + (3,)]  # it got the whole demosaiced image
+    assert again.samples.tobytes() == plain.samples.tobytes()

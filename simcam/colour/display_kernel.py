@@ -105,15 +105,37 @@ def encode_display(rgb: np.ndarray, matrix: np.ndarray, *, lo: float | None = No
     ValueError
         If the matrix product has a NaN or infinite value.
     """
+    encode = display_encoder(matrix, lo=lo, hi=hi, curve=curve, depth=depth)  # checks curve and depth first
+    rgb = np.asarray(rgb, dtype=np.float32)
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise ValueError(f"encode_display: expected an H x W x 3 image, got shape {rgb.shape}")
+    h, w = rgb.shape[:2]
+    out = np.empty((h, w, 3), sample_dtype(depth))
+    if run_bands(h, lambda r0, r1: encode(rgb[r0:r1], out[r0:r1]), rows=BAND_ROWS):
+        raise ValueError("image data contains NaN or infinite values")
+    return out
+
+
+def sample_dtype(depth: str) -> np.dtype:
+    """The numpy type of ``depth`` samples (``half`` is float16)."""
+    return np.dtype(np.float16 if depth == "half" else depth)
+
+
+def display_encoder(matrix: np.ndarray, *, lo: float | None = None, hi: float | None = None, curve: str = "srgb",
+                    depth: str = "uint8"):
+    """The per-band work of :func:`encode_display` as a function ``encode(x, out) -> bool``.
+
+    ``x`` is an n x w x 3 float32 block of rows (any strides), ``out`` the n x w x 3 ``depth`` block it
+    is written to; the return value is True when a product is NaN or infinite (``out`` is then not
+    complete). Blocks are independent, so callers run them on threads in any order (the demosaic
+    kernels call it on each strip they finish: :func:`simcam.render_samples.render_demosaic_tail`).
+    """
     from .display import srgb_oetf
 
     if curve not in ("srgb", "linear"):
         raise ValueError(f"encode_display: curve: expected 'srgb' or 'linear', got {curve!r}")
     if depth not in ("uint8", "uint16", "float32", "half"):
         raise ValueError(f"encode_display: depth: expected uint8, uint16, float32 or half, got {depth!r}")
-    rgb = np.asarray(rgb, dtype=np.float32)
-    if rgb.ndim != 3 or rgb.shape[2] != 3:
-        raise ValueError(f"encode_display: expected an H x W x 3 image, got shape {rgb.shape}")
     m = np.asarray(matrix, dtype=np.float64).astype(np.float32)
     lo = -np.inf if lo is None else float(lo)
     hi = np.inf if hi is None else float(hi)
@@ -121,43 +143,67 @@ def encode_display(rgb: np.ndarray, matrix: np.ndarray, *, lo: float | None = No
     if integer:  # clip(clip(v, lo, hi), 0, 1) == clip(v, clip(lo, 0, 1), clip(hi, 0, 1))
         lo, hi = float(np.clip(lo, 0.0, 1.0)), float(np.clip(hi, 0.0, 1.0))
     flo, fhi = np.float32(lo), np.float32(hi)
-    h, w = rgb.shape[:2]
-    out = np.empty((h, w, 3), depth if depth != "half" else np.float16)
+    code_type = sample_dtype(depth)
     if integer and curve == "srgb":
         table, scale = code_table(depth), np.float32(table_steps(depth))
     else:
         table, scale = None, np.float32(255 if depth == "uint8" else 65535)
+    # a block's values bound every product: |v| <= max|x| * max_c sum_j |M[c, j]|
+    gain = float(np.abs(m.astype(np.float64)).sum(axis=1).max())
 
-    def band(r0: int, r1: int) -> bool:
-        x = rgb[r0:r1]
-        r, g, b = x[..., 0], x[..., 1], x[..., 2]
-        acc = np.empty(r.shape, np.float32)
-        tmp = np.empty(r.shape, np.float32)
-        ok = np.empty(r.shape, bool)
-        idx = np.empty(r.shape, np.int32) if integer else None
+    def encode(x: np.ndarray, out: np.ndarray) -> bool:
+        # the three channels as contiguous planes: numpy's contiguous loops are SIMD, its strided ones
+        # are not (a multiply reading every third float32 takes ~10x as long as one reading them all)
+        planes = [np.ascontiguousarray(x[..., j], dtype=np.float32) for j in range(3)]
+        if not _finite_products(planes, m, gain):
+            return True
+        acc = np.empty(planes[0].shape, np.float32)
+        tmp = np.empty_like(acc)
+        idx = np.empty(acc.shape, np.int32) if integer else None
+        codes = np.empty(acc.shape, code_type) if table is not None else None
+        r, g, b = planes
         for c in range(3):
             np.multiply(r, m[c, 0], out=acc)
             np.multiply(g, m[c, 1], out=tmp)
             acc += tmp
             np.multiply(b, m[c, 2], out=tmp)
             acc += tmp
-            np.isfinite(acc, out=ok)
-            if not ok.all():
-                return True
             if flo > -np.inf or fhi < np.inf:
                 np.clip(acc, flo, fhi, out=acc)
             if integer:
                 acc *= scale
                 np.rint(acc, out=acc)
                 idx[...] = acc
-                out[r0:r1, :, c] = table[idx] if table is not None else idx
+                if table is not None:  # idx is in [0, steps] (clipped above): mode="clip" skips the bounds check
+                    np.take(table, idx, out=codes, mode="clip")
+                    out[..., c] = codes
+                else:
+                    out[..., c] = idx
             else:
-                out[r0:r1, :, c] = srgb_oetf(acc) if curve == "srgb" else acc
+                out[..., c] = srgb_oetf(acc) if curve == "srgb" else acc
         return False
 
-    if run_bands(h, band, rows=BAND_ROWS):
-        raise ValueError("image data contains NaN or infinite values")
-    return out
+    return encode
+
+
+def _finite_products(planes: list[np.ndarray], m: np.ndarray, gain: float) -> bool:
+    """True when every product ``(M[c, 0] r + M[c, 1] g) + M[c, 2] b`` of the band is finite (float32).
+
+    The planes hold no NaN or infinity (``min`` and ``max`` propagate them), and where
+    ``max|x| * gain`` stays far inside float32's range no product can overflow; only otherwise are the
+    products computed and checked one by one (a band of huge values).
+    """
+    bound = 0.0
+    for p in planes:
+        lo, hi = float(p.min()), float(p.max())
+        if not (np.isfinite(lo) and np.isfinite(hi)):
+            return False
+        bound = max(bound, -lo, hi)
+    if bound * gain < 1e37:
+        return True
+    r, g, b = planes
+    with np.errstate(over="ignore", invalid="ignore"):
+        return all(bool(np.isfinite((r * m[c, 0] + g * m[c, 1]) + b * m[c, 2]).all()) for c in range(3))
 
 
 def quantise(data: np.ndarray, depth: str) -> np.ndarray:

@@ -108,17 +108,49 @@ class PhaseView:
         return self.planes[pa & 1][qb & 1][self.s0 + di:self.s1 + di, dj:dj + self.w2]
 
 
-def strip_setup(mosaic, cfa: str, method: str):
+def strip_setup(mosaic, cfa: str, method: str, *, full: bool = True):
     """What the strip kernels start from: the checked mosaic and pattern, its phase planes, the
-    half-size grid ``(h2, w2)``, the even-size float32 output and the strip height.
+    half-size grid ``(h2, w2)``, the even-size float32 output (None when ``full`` is False: the strips
+    then go to a sink, :class:`StripTarget`) and the strip height.
 
     Returns ``(m, cfa, planes, h2, w2, rgb, rows)``; crop ``rgb`` to ``m.shape`` with :func:`crop_output`.
     """
     m, cfa = check_mosaic(mosaic, cfa, method)
     planes, he, we = phase_planes(m)
     h2, w2 = he // 2, we // 2
-    rgb = np.empty((he, we, 3), dtype=np.float32)
+    rgb = np.empty((he, we, 3), dtype=np.float32) if full else None
     return m, cfa, planes, h2, w2, rgb, min(STRIP_ROWS, h2)
+
+
+class StripTarget:
+    """Where a strip kernel writes the RGB rows of phase-plane rows ``[s0, s1)``.
+
+    Without a sink, into the whole even-sized output ``rgb``. With a sink, into a buffer of one strip
+    per thread, handed to ``sink(y0, y1, block)`` once the strip is complete: ``block`` holds output
+    rows ``[y0, y1)`` cropped to the mosaic's H x W (a view of the buffer, valid during the call).
+    The sink's return value (True: stop, e.g. a non-finite value) is the strip's.
+    """
+
+    def __init__(self, rgb: np.ndarray | None, sink, rows: int, h: int, w: int, w2: int):
+        import threading
+
+        self.rgb, self.sink, self.rows, self.h, self.w, self.w2 = rgb, sink, rows, h, w, w2
+        self.local = threading.local()
+
+    def block(self, s0: int) -> tuple[np.ndarray, int]:
+        """The array the strip starting at plane row ``s0`` writes to, and the output row it starts at."""
+        if self.sink is None:
+            return self.rgb, 0
+        buf = getattr(self.local, "rgb", None)
+        if buf is None:
+            buf = self.local.rgb = np.empty((2 * self.rows, 2 * self.w2, 3), dtype=np.float32)
+        return buf, 2 * s0
+
+    def done(self, s0: int, s1: int, buf: np.ndarray) -> bool:
+        if self.sink is None:
+            return False
+        y0, y1 = 2 * s0, min(2 * s1, self.h)
+        return bool(self.sink(y0, y1, buf[: y1 - y0, : self.w]))
 
 
 def site_layout(cfa: str) -> dict[tuple[int, int], tuple[int, int]]:

@@ -16,10 +16,10 @@ import threading
 import numpy as np
 
 from ..parallel import run_bands
-from ._planes import PhaseView, crop_output, site_layout, strip_setup
+from ._planes import PhaseView, StripTarget, crop_output, site_layout, strip_setup
 
 
-def demosaic_bilinear(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
+def demosaic_bilinear(mosaic: np.ndarray, cfa: str = "RGGB", *, sink=None):
     """Demosaic a Bayer mosaic by bilinear interpolation.
 
     Parameters
@@ -28,6 +28,13 @@ def demosaic_bilinear(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
         H x W Bayer mosaic (computed in float32); H, W >= 2, odd sizes allowed.
     cfa : str
         "RGGB", "BGGR", "GRBG" or "GBRG".
+
+    sink : callable, optional
+        ``sink(y0, y1, block) -> bool``: instead of an H x W x 3 output, each strip's output rows
+        ``[y0, y1)`` (``block``, (y1 - y0) x W x 3 float32, valid during the call) are handed to it
+        as soon as they are computed, from the strip's thread; the return value is then True if any
+        call returned True. A render streams strips into the display tail this way without holding
+        the whole RGB image (:func:`simcam.render_samples.render_demosaic_tail`).
 
     Returns
     -------
@@ -47,8 +54,9 @@ def demosaic_bilinear(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
     >>> rgb.shape, bool(np.allclose(rgb, 0.25))
     ((6, 8, 3), True)
     """
-    m, cfa, planes, h2, w2, rgb, rows = strip_setup(mosaic, cfa, "bilinear")
+    m, cfa, planes, h2, w2, rgb, rows = strip_setup(mosaic, cfa, "bilinear", full=sink is None)
     h, w = m.shape
+    target = StripTarget(rgb, sink, rows, h, w, w2)
     local = threading.local()
 
     def strip(s0: int, s1: int) -> bool:  # strips are independent: run on threads, same bytes
@@ -56,9 +64,10 @@ def demosaic_bilinear(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
         if buf is None:
             buf = local.buf = np.empty((rows, w2), dtype=np.float32)
         t = buf[: s1 - s0]
+        dest, y0 = target.block(s0)
         for (p, q), (site, horiz) in site_layout(cfa).items():
             nb = PhaseView(planes, p, q, s0, s1, w2)
-            out = rgb[2 * s0 + p:2 * s1:2, q::2]
+            out = dest[2 * s0 - y0 + p:2 * s1 - y0:2, q::2]
             out[..., site] = nb(0, 0)
             if site == 1:  # G site: row neighbours give `horiz`, column neighbours the other
                 np.add(nb(0, -1), nb(0, 1), out=t)
@@ -74,7 +83,7 @@ def demosaic_bilinear(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
                 t += nb(1, -1)
                 t += nb(1, 1)
                 np.multiply(t, 0.25, out=out[..., 2 - site])
-        return False
+        return target.done(s0, s1, dest)
 
-    run_bands(h2, strip, rows=rows)
-    return crop_output(rgb, h, w)
+    stopped = run_bands(h2, strip, rows=rows)
+    return stopped if sink is not None else crop_output(rgb, h, w)

@@ -19,10 +19,10 @@ import threading
 import numpy as np
 
 from ..parallel import run_bands
-from ._planes import PhaseView, crop_output, site_layout, strip_setup
+from ._planes import PhaseView, StripTarget, crop_output, site_layout, strip_setup
 
 
-def demosaic_malvar2004(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
+def demosaic_malvar2004(mosaic: np.ndarray, cfa: str = "RGGB", *, sink=None):
     """Demosaic a Bayer mosaic with the Malvar-He-Cutler 2004 kernels.
 
     Parameters
@@ -32,6 +32,13 @@ def demosaic_malvar2004(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
         raw in [0, 1] with negatives allowed. H, W >= 2; odd sizes are allowed.
     cfa : str
         "RGGB", "BGGR", "GRBG" or "GBRG" (colour of pixels (0,0), (0,1), (1,0), (1,1)).
+
+    sink : callable, optional
+        ``sink(y0, y1, block) -> bool``: instead of an H x W x 3 output, each strip's output rows
+        ``[y0, y1)`` (``block``, (y1 - y0) x W x 3 float32, valid during the call) are handed to it
+        as soon as they are computed, from the strip's thread; the return value is then True if any
+        call returned True. A render streams strips into the display tail this way without holding
+        the whole RGB image (:func:`simcam.render_samples.render_demosaic_tail`).
 
     Returns
     -------
@@ -52,8 +59,9 @@ def demosaic_malvar2004(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
     >>> float(demosaic_malvar2004(mosaic, "RGGB")[0, 0, 0]) == float(mosaic[0, 0])  # red at (0, 0) kept
     True
     """
-    m, cfa, planes, h2, w2, rgb, rows = strip_setup(mosaic, cfa, "malvar2004")
+    m, cfa, planes, h2, w2, rgb, rows = strip_setup(mosaic, cfa, "malvar2004", full=sink is None)
     h, w = m.shape
+    target = StripTarget(rgb, sink, rows, h, w, w2)
     layout = site_layout(cfa)
     local = threading.local()
 
@@ -62,19 +70,20 @@ def demosaic_malvar2004(mosaic: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
         if bufs is None:
             bufs = local.bufs = [np.empty((rows, w2), dtype=np.float32) for _ in range(5)]
         t = [b[: s1 - s0] for b in bufs]
+        dest, y0 = target.block(s0)
         for (p, q), (site, horiz) in layout.items():
             nb = PhaseView(planes, p, q, s0, s1, w2)
-            out = rgb[2 * s0 + p:2 * s1:2, q::2]
+            out = dest[2 * s0 - y0 + p:2 * s1 - y0:2, q::2]
             c = nb(0, 0)
             out[..., site] = c
             if site == 1:
                 _green_site(nb, c, out, horiz, 2 - horiz, *t)
             else:
                 _red_blue_site(nb, c, out, 2 - site, *t)
-        return False
+        return target.done(s0, s1, dest)
 
-    run_bands(h2, strip, rows=rows)
-    return crop_output(rgb, h, w)
+    stopped = run_bands(h2, strip, rows=rows)
+    return stopped if sink is not None else crop_output(rgb, h, w)
 
 
 def _red_blue_site(nb, c, out, other, t1, t2, t3, t4, t5):

@@ -27,12 +27,20 @@ class Demosaic(Stage, type="demosaic", accepts=frozenset({"raw"}), produces="cam
     class Params(StageParams):
         method: Literal["bilinear", "malvar2004", "menon2007"] = "malvar2004"
 
+    #: methods whose kernels can hand their output to a sink strip by strip (``stream``)
+    STREAMING = frozenset({"bilinear", "malvar2004"})
+
     def apply(self, frame: RawFrame, drawn=None) -> RawFrame:
+        return frame.evolve(self.stream(frame), kind="camera_rgb", step=self.type)
+
+    def stream(self, frame: RawFrame, sink=None):
+        """The kernel on ``frame``: the H x W x 3 RGB, or with ``sink`` (methods in :attr:`STREAMING`)
+        each strip's rows handed to ``sink(y0, y1, block)`` and True if a call returned True."""
         src = frame.meta.source or "frame"
         if frame.meta.cfa is None:
             raise StageError(f"{src}: cfa: demosaic needs a Bayer pattern (RGGB, BGGR, GRBG, GBRG), got None")
+        kernel = DEMOSAIC_METHODS[self.params.method]
         try:
-            rgb = DEMOSAIC_METHODS[self.params.method](frame.data, frame.meta.cfa)
+            return kernel(frame.data, frame.meta.cfa) if sink is None else kernel(frame.data, frame.meta.cfa, sink=sink)
         except StageError as exc:
             raise StageError(f"{src}: {exc}") from None
-        return frame.evolve(rgb, kind="camera_rgb", step=self.type)

@@ -94,6 +94,13 @@ class Crop(Stage, type="crop", accepts=frozenset(SIGNAL_KINDS)):
         return (top, left, top + int(round(ch)), left + int(round(cw)))
 
     def apply(self, frame: RawFrame, drawn=None) -> RawFrame:
+        (top, left, bottom, right), meta = self.plan(frame)
+        data = np.ascontiguousarray(frame.data[top:bottom, left:right])
+        return frame.evolve(data, meta=meta, step=self.type)
+
+    def plan(self, frame: RawFrame):
+        """The rectangle ``(top, left, bottom, right)`` this crop takes from ``frame`` and the metadata
+        of the result (the checks of :meth:`apply`, without touching the pixels)."""
         top, left, bottom, right = self.target_rect(frame)
         src = frame.meta.source or "frame"
         if not (0 <= top < bottom <= frame.height and 0 <= left < right <= frame.width):
@@ -108,5 +115,4 @@ class Crop(Stage, type="crop", accepts=frozenset(SIGNAL_KINDS)):
                     f"{meta.cfa}; expected even offsets, or set phase: update to re-label the pattern")
             meta.cfa = shift_pattern(meta.cfa, top, left)
         meta.origin = (meta.origin[0] + top, meta.origin[1] + left)
-        data = np.ascontiguousarray(frame.data[top:bottom, left:right])
-        return frame.evolve(data, meta=meta, step=self.type)
+        return (top, left, bottom, right), meta

@@ -46,10 +46,12 @@ def apply_gains(frame: RawFrame, gains: np.ndarray) -> np.ndarray:
     if frame.meta.cfa is None:
         raise StageError(f"{frame.meta.source or 'frame'}: cfa: a mosaic needs meta.cfa to be white-balanced")
     idx = site_colour_index(frame.meta.cfa)
-    out = np.array(frame.data, dtype=np.float32, copy=True)
-    for dy in range(2):
-        for dx in range(2):
-            out[dy::2, dx::2] *= g[idx[dy, dx]]
+    data = np.asarray(frame.data)
+    h, w = data.shape
+    out = np.empty((h, w), dtype=np.float32)
+    for dy in range(2):  # one gain row per CFA row: contiguous rows (SIMD loops) instead of strided sites
+        row = np.resize(g[idx[dy]], w)
+        np.multiply(data[dy::2], row, out=out[dy::2], dtype=np.float32)
     return out
 
 
