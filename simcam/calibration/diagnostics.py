@@ -40,6 +40,10 @@ telegraph_pixels        rtn                 fraction of pixels whose dark frames
                                             noise (>= 2 frames on each: switching)
 prnu_excess             prnu                per plane (even/odd flat-map covariance - same of the
                                             darks) / signal^2, mean over planes
+flat_spread_growth      empirical_response  relative fixed-pattern variance of the brightest flat minus
+                                            that of a dimmer one at 10-80 % of its signal (a gain's is
+                                            the same at every level; a per-pixel response curvature's
+                                            grows with the signal squared)
 black_offset            black_level_offset  median of dark mean map - declared black (DN)
 dark_signal_slope       dark_current        least-squares slope of the dark level (1 %-trimmed mean of
                                             each sequence's temporal-mean image: hot pixels left out)
@@ -97,7 +101,7 @@ PLANE_OFFSETS = ((0, 0), (0, 1), (1, 0), (1, 1))
 DIAGNOSTICS = (
     "ptc_curvature", "plane_gain_spread", "row_mean_excess", "row_spectrum_peak", "col_spectrum_peak",
     "col_temporal_excess", "row_mean_lag1", "dark_checker_jitter", "col_fpn_excess", "col_fpn_spectrum_peak", "dsnu_excess",
-    "hot_pixel_tail", "prnu_excess",
+    "hot_pixel_tail", "prnu_excess", "flat_spread_growth",
     "black_offset", "dark_signal_slope", "dark_variance_slope", "frame_mean_jitter", "frame_mean_drift",
     "dark_frame_jitter", "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "lag1_corr",
     "lag2_corr", "defect_pixels", "glow_field",
@@ -132,6 +136,7 @@ NEEDS = {
     "dsnu_excess": "needs a dark sequence",
     "hot_pixel_tail": "needs a dark sequence",
     "prnu_excess": "needs a flat sequence",
+    "flat_spread_growth": "needs flat sequences of >= 2 frames at two levels, the dimmer at 10-80 % of the brighter",
     "black_offset": "needs a dark sequence and a declared black level",
     "dark_signal_slope": "needs darks at >= 2 exposure times",
     "frame_mean_jitter": "needs a flat sequence",
@@ -1082,6 +1087,29 @@ def prnu_by_level(d: CaptureData, blocks: int = 16) -> list[tuple[float, float, 
         se = float(np.sqrt((blocks - 1) / blocks * np.sum((jk - jk.mean()) ** 2)))
         out.append((float(np.mean(levels)), full, se))
     return sorted(out)
+
+
+def flat_level_pair(rows: list[tuple[float, float, float]]):
+    """The (dimmer, brightest) rows of :func:`prnu_by_level` whose signals are two distinct levels: the
+    brightest flat and the first dimmer one at 10-80 % of its signal; None without such a pair."""
+    if len(rows) < 2:
+        return None
+    hi = rows[-1]
+    lows = [r for r in rows[:-1] if 0.1 * hi[0] <= r[0] <= 0.8 * hi[0]]
+    return (lows[0], hi) if lows else None
+
+
+def flat_spread_growth(d: CaptureData):
+    """Relative fixed-pattern variance of the brightest flat minus that of a dimmer one at 10-80 % of its
+    signal (:func:`prnu_by_level`, :func:`flat_level_pair`). A gain (PRNU, EMVA 1288 Release 4.0 sec. 8.2)
+    has the same relative variance at every level: 0 up to sampling noise. A response that curves by a
+    different amount in each pixel (``y = x + c_p x^2 / s``) adds ``sd(c)^2 x^2 / s^2`` to it, which grows
+    with the signal; a common compressive response makes it fall slightly (the elasticity)."""
+    pair = flat_level_pair(prnu_by_level(d))
+    if pair is None:
+        return None
+    lo, hi = pair
+    return hi[1] - lo[1]
 
 
 def prnu_excess(d: CaptureData):

@@ -228,8 +228,8 @@ class Composite(NoiseModel):
             if e.stage == "signal":
                 continue
             if e.role() == "response":
-                y = e.inverse(y)
-                log_jac += e.log_slope(y)
+                y = e.inverse(y, fixed[i])
+                log_jac += e.log_slope(y, fixed[i])
             else:
                 ctx = EffectContext(cfa=cond.cfa, key=None, stream=1 + i, fixed=fixed[i], frame={}, signal=signal,
                                     exposure_s=cond.exposure_s)

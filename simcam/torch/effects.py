@@ -210,6 +210,10 @@ def nonlinearity(group: Group, x, ctx: Ctx, st: EffectState):
     return x - s * x * x
 
 
+def empirical_response(group: Group, x, ctx: Ctx, st: EffectState):
+    return x - st.fixed("strength") * x * x
+
+
 def quantization(group: Group, x, ctx: Ctx, st: EffectState):
     """Rounded to the ADC step in DN (float64 arithmetic, round half to even as numpy); no gradient."""
     f = lambda name: ctx.scalar(group, lambda e: getattr(e, name), dtype=torch.float64)  # noqa: E731
@@ -364,6 +368,7 @@ EFFECTS = {
     "empirical_code": empirical_code, "dark_current": dark_current, "amp_glow": amp_glow,
     "empirical_field": empirical_field, "empirical_offset": empirical_offset, "empirical_gain": empirical_gain,
     "empirical_lines": empirical_lines, "empirical_spectrum": empirical_spectrum,
+    "empirical_response": empirical_response,
 }
 
 #: fixed-draw keys that are 1-D tables, not maps (kept per distinct model, never cropped).
@@ -414,6 +419,8 @@ def fixed_arrays(effect, fixed: dict[str, Any], shape: tuple[int, int]) -> dict[
         return {"gain": _map3(fixed["gain"], shape)}
     if t == "empirical_lines":
         return {"offset": _map3(fixed["offset"], shape)}
+    if t == "empirical_response":
+        return {"strength": _map3(fixed["strength"], shape)}
     if effect.type == "column_fpn":
         return {"col": np.asarray(fixed["col"], np.float64)[:w].reshape(1, 1, w)}
     if effect.type == "dsnu":

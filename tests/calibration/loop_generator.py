@@ -50,6 +50,9 @@ seed eq. 3.6 for the Poisson-Gaussian core)::
 * ``black_wander``: a black level that wanders from frame to frame, a first-order autoregression over
   the frames of each sequence (``b_f = rho b_(f-1) + sqrt(1 - rho^2) sigma_dn n_f``), the same for every
   pixel: outside the vocabulary (``empirical_offset``, frame form).
+* ``pixel_curvature``: each pixel's response bends by its own amount, ``x + c_p x^2 / (white - black)``
+  where ``nonlinearity`` acts, ``c_p ~ N(c_mean, c_sd^2)`` drawn once per sensor (after the other
+  patterns): outside the vocabulary (``empirical_response``).
 * ``checker_offset`` N(0, s^2) per frame, added with opposite signs to the 00/11 and the 01/10
   sites (interleaved readout channels, as in the EMVA 1288 CCD data): also outside the vocabulary.
 """
@@ -207,6 +210,10 @@ class HiddenEffectSensor:
         if "adc_dnl" in spec.effects:  # transition levels off their ideal places, drawn once (sorted: no overlap)
             n = 2 ** spec.bits
             self.adc_edges = np.sort(np.arange(n - 1) + 0.5 + rng.normal(0, spec.effects["adc_dnl"]["dnl_sigma"], n - 1))
+        self.curvature = None
+        if "pixel_curvature" in eff:  # NOT in the vocabulary; drawn last: the other patterns are a plain sensor's
+            p = eff["pixel_curvature"]
+            self.curvature = p["c_mean"] + p["c_sd"] * rng.standard_normal((h, w))
 
     def frames(self, mu_e: np.ndarray | float, n_frames: int, rng, exposure_s: float = 0.01) -> np.ndarray:
         """``n_frames`` x H x W frames in DN (float32 holding integer codes) at ``exposure_s`` seconds."""
@@ -268,6 +275,8 @@ class HiddenEffectSensor:
                 x = x + p["amplitude_dn"] * np.sin(2 * np.pi * r / p["period_px"] + rng.uniform(0, 2 * np.pi))
             if "nonlinearity" in eff:
                 x = x + eff["nonlinearity"]["c"] * x ** 2 / (s.white_dn - s.black_dn)
+            if self.curvature is not None:  # each pixel's response bends by its own amount
+                x = x + self.curvature * x ** 2 / (s.white_dn - s.black_dn)
             v = s.black_dn + eff.get("black_level_offset", {}).get("offset_dn", 0.0) + self.offset + x + wander[f]
             q = eff.get("quantization", {}).get("step_dn", 1)
             if self.adc_edges is not None:  # code k spans [edges[k-1], edges[k])

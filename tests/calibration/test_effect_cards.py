@@ -23,6 +23,7 @@ from simcam.calibration.effects.dark_current import DarkCurrent
 from simcam.calibration.effects.dead_pixels import DeadPixels
 from simcam.calibration.effects.dsnu import Dsnu
 from simcam.calibration.effects.empirical_lines import EmpiricalLines
+from simcam.calibration.effects.empirical_response import EmpiricalResponse, measured_law
 from simcam.calibration.effects.empirical_offset import EmpiricalOffset
 from simcam.calibration.effects.empirical_spectrum import EmpiricalSpectrum
 from simcam.calibration.effects.frame_flicker import FrameFlicker
@@ -65,6 +66,10 @@ EXAMPLES = {
     "empirical_lines": EmpiricalLines(lines_dn=[[0.25, 1.4], [0.125, 0.5]]),
     "empirical_spectrum": EmpiricalSpectrum(frequencies=[0.0156, 0.05, 0.2, 0.45], power_dn2=[9.0, 2.5, 0.4, 0.1],
                                             dc_power_dn2=6.0),
+    # a skewed law (every pixel compressing, some more): half-normal curvatures
+    "empirical_response": EmpiricalResponse(
+        c_mean=-0.04, c_sd=0.025,
+        quantiles=measured_law(-np.abs(np.random.default_rng(3).standard_normal(4000)), 0.025)),
 }
 #: diagnostics that by design propose no effect (outside the vocabulary)
 UNATTRIBUTED = {"dark_checker_jitter"}  # no effect of the vocabulary makes it
@@ -99,7 +104,7 @@ def test_every_effect_has_a_card():
     # effects outside it: the generator's column_noise, interleaved_columns and row_wander)
     assert set(EFFECTS) == {n for n, c in CARDS.items() if c.family is None}
     assert {n for n, c in CARDS.items() if c.family is not None} == {"empirical_offset", "empirical_lines",
-                                                                      "empirical_spectrum"}
+                                                                      "empirical_spectrum", "empirical_response"}
     # every effect type the loop writes to profile.yaml, and every one its bootstrap samples, has a card
     m = _model(dict(EXAMPLES))
     entry, _ = noise_entry(m)
@@ -179,7 +184,8 @@ def test_read_noise_bookkeeping_and_marginal_variance():
     """refit_read and set_dark_variance_from_read are inverse; the marginal variance is the closed form of
     model.py's docstring: (K g x + read^2 + row^2 + A^2/2 + (flicker x)^2 + (prnu x)^2) slope^2 + dsnu^2 + col^2
     + q^2/12, x the linear signal; None with a non-Gaussian effect."""
-    gaussian = {k: v for k, v in EXAMPLES.items() if CARDS[k].gaussian and k != "charge_crosstalk"}
+    gaussian = {k: v for k, v in EXAMPLES.items()
+                if CARDS[k].gaussian and k not in ("charge_crosstalk", "empirical_response")}
     m = _model(gaussian)
     read = m.read_dn
     m.refit_read()
@@ -201,6 +207,13 @@ def test_read_noise_bookkeeping_and_marginal_variance():
     assert marginal_variance(m, y, fixed_in_clean=True) == pytest.approx(temporal * slope2 + 16 / 12, rel=1e-9)
     for name in ("hot_pixels", "heavy_tail_read"):
         assert marginal_variance(_model({name: EXAMPLES[name]}), y) is None
+    # a per-pixel response curvature: the mean curvature's slope, and its spread's fixed pattern (sd(c) x^2 / s)^2
+    er = EXAMPLES["empirical_response"]
+    m = _model({"empirical_response": er})
+    cm = er.c_mean
+    x = (np.sqrt(1 + 4 * cm * y / FS) - 1) * FS / (2 * cm)
+    want = (2.0 * x + m.read_dn ** 2) * (1 + 2 * cm * x / FS) ** 2 + (er.c_sd * x * x / FS) ** 2 + 1 / 12  # + the ADC step
+    assert marginal_variance(m, y) == pytest.approx(want, rel=1e-9)
 
 
 def test_charge_crosstalk_marginal_and_signal():
@@ -228,7 +241,8 @@ def _fit_data(name: str, seed: int = 3):
     # an empirical component is fitted on the generator's effect outside the vocabulary it stands for
     outside = {"empirical_offset": {"column_noise": {"sigma_dn": 1.5}},
                "empirical_lines": {"interleaved_columns": {"offset_dn": 3.0, "period_px": 4}},
-               "empirical_spectrum": {"row_wander": {"sigma_dn": 2.0, "rho": 0.8}}}
+               "empirical_spectrum": {"row_wander": {"sigma_dn": 2.0, "rho": 0.8}},
+               "empirical_response": {"pixel_curvature": {"c_mean": -0.05, "c_sd": 0.1}}}
     effects = outside.get(name) or {name: DEFAULT_EFFECTS[name]}
     spec = SensorSpec(height=side, width=side, effects=effects)
     cs = in_memory_capture(capture_set(spec, n_frames=8, seed=seed))

@@ -36,6 +36,7 @@ EXAMPLES = {
     "empirical_spectrum": {"axis": "row", "frequencies": [0.02, 0.1, 0.5], "power": [1e-5, 2e-6, 1e-6]},
     "empirical_code": {"range_dn": 1023.0, "offset_dn": 64.0, "edges": [float(k) + 0.5 for k in range(1100)]},
     "empirical_field": {"field": [[1e-3, 2e-3], [3e-3, 4e-3]], "electron": 1e-3},
+    "empirical_response": {"quantiles": [-0.01, 0.0, 0.02, 0.05, 0.12]},
 }
 
 

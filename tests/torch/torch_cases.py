@@ -80,6 +80,7 @@ EFFECT_CASES = {
                             "power": [4e-4, 1e-4, 2e-5, 1e-5]},
                            {"type": "empirical_spectrum", "axis": "column", "frequencies": [0.02, 0.5],
                             "power": [2e-4, 1e-5], "scale": 1.5}],
+    "empirical_response": [{"type": "empirical_response", "quantiles": [-0.05, 0.0, 0.05, 0.15, 0.3]}],
 }
 
 #: exposure time (seconds) given to both samplers (exposure-dependent effects).

@@ -16,7 +16,8 @@ from .. import diagnostics as _dg
 from . import (black_level_offset, channel_gain, column_fpn, dark_current, dead_pixels, dsnu, frame_flicker,
                heavy_tail_read, hot_pixels,
                nonlinearity, periodic_pattern, prnu, quantization, row_noise, spatial_correlation)
-from . import adc_dnl, amp_glow, charge_crosstalk, empirical_lines, empirical_offset, empirical_spectrum, rtn
+from . import (adc_dnl, amp_glow, charge_crosstalk, empirical_lines, empirical_offset, empirical_response,
+               empirical_spectrum, rtn)
 from .card import EffectCard, EffectParams, Fit, FitContext, ProfileTerm
 
 __all__ = ["CARDS", "DIAGNOSTIC_EFFECT", "EffectCard", "EffectParams", "Fit", "FitContext", "ProfileTerm",
@@ -40,6 +41,7 @@ CARDS: dict[str, EffectCard] = {c.name: c for c in (
     dark_current.DarkCurrentCard(),
     amp_glow.AmpGlowCard(),
     nonlinearity.NonlinearityCard(),
+    empirical_response.EmpiricalResponseCard(),
     column_fpn.ColumnFpnCard(),
     empirical_lines.EmpiricalLinesCard(),
     dsnu.DsnuCard(),

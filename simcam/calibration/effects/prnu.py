@@ -63,14 +63,10 @@ def spread_growth(d, c: float, s: float) -> tuple[float, float, float, float] | 
     """(ratio of the relative spreads, its z, level-independent relative variance, its standard error) of
     the brightest flat against the dimmest at 10-80 % of its signal, a nonlinearity ``c`` (full scale
     ``s``) divided out; None without such a pair of flats."""
-    rows = dg.prnu_by_level(d)
-    if len(rows) < 2:
+    pair = dg.flat_level_pair(dg.prnu_by_level(d))
+    if pair is None:
         return None
-    hi = rows[-1]
-    lows = [r for r in rows[:-1] if 0.1 * hi[0] <= r[0] <= 0.8 * hi[0]]  # two distinct levels
-    if not lows:
-        return None
-    lo = lows[0]
+    lo, hi = pair
     e = [(_elasticity(c, r[0], s) if c else 1.0) ** 2 for r in (lo, hi)]
     vlo, vhi = lo[1] / e[0], hi[1] / e[1]
     slo, shi = lo[2] / e[0], hi[2] / e[1]

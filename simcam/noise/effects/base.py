@@ -42,7 +42,7 @@ EFFECT_NAMES = ("row_noise", "column_fpn", "dsnu", "prnu", "hot_pixels", "heavy_
                 "spatial_correlation", "periodic_pattern", "black_level_offset", "frame_flicker", "nonlinearity",
                 "channel_gain", "dark_current", "amp_glow", "dead_pixels", "adc_dnl", "rtn", "charge_crosstalk",
                 "empirical_offset", "empirical_gain", "empirical_lines", "empirical_spectrum", "empirical_code",
-                "empirical_field")
+                "empirical_field", "empirical_response")
 
 _EFFECTS = Registry("effect type")
 

@@ -22,7 +22,10 @@ probabilities).
   drawn every frame by spectral synthesis;
 * ``empirical_code`` — the ADC's measured transition levels (DN): the code of each value;
 * ``empirical_field`` — a smooth measured dark field in normalised raw per second (glow-like),
-  with its Poisson shot noise through ``electron``.
+  with its Poisson shot noise through ``electron``;
+* ``empirical_response`` — a response that curves by a different amount in every pixel,
+  ``y = x - s_p x^2`` on the noisy value, ``s_p`` a measured map or a per-sensor draw from the
+  measured law of the per-pixel strength (``nonlinearity`` with a fixed pattern of its strength).
 """
 
 from __future__ import annotations
@@ -275,3 +278,53 @@ class EmpiricalField(Effect):
         _add_poisson_electrons(x, ctx.fixed["rate"][: x.shape[0], : x.shape[1]] * t / self.electron, self.electron,
                                ctx)
         return x
+
+
+@register_effect
+class EmpiricalResponse(_MapOrQuantiles):
+    """Per-pixel response curvature: ``y = x - s_p x^2`` on the noisy value, ``s_p`` fixed per pixel.
+
+    Physics. The floating-diffusion capacitance and the source follower's gain differ from pixel to
+    pixel, so each pixel's charge-to-voltage response bends by its own amount: the flats' fixed
+    pattern then grows faster than the signal (a gain's grows in proportion), and its mean over the
+    pixels is the sensor's common non-linearity (EMVA 1288 Release 4.0, sec. 6: linearity, measured on
+    the mean; sec. 8: the spatial non-uniformity at each level). As ``nonlinearity`` it acts on the
+    noisy value (shot and read noise included) and is placed where that effect is.
+
+    Units. Normalised raw above black; ``s_p`` dimensionless (``nonlinearity``'s ``strength`` of
+    pixel p), drawn once per sensor from ``quantiles`` (the measured law of the per-pixel strength) or
+    read from ``map``; every value within +-0.45 (monotonic below x = 1.1).
+    """
+
+    type: Literal["empirical_response"] = "empirical_response"
+    logprob_role = "response"
+    stack_ok = True
+
+    @model_validator(mode="after")
+    def _range(self):
+        if self.quantiles is not None and max(abs(self.scale * q) for q in self.quantiles) > 0.45:
+            raise ValueError("quantiles: per-pixel strengths must lie within +-0.45 (a monotonic response)")
+        return self
+
+    def fixed(self, shape, rng):
+        s = self._pattern(shape, rng, "pixel")
+        if float(np.max(np.abs(s))) > 0.45:
+            raise NoiseModelError(f"effect 'empirical_response': map {self.map}: strengths must lie within +-0.45")
+        return {"strength": s}
+
+    def apply(self, x, ctx):
+        s = ctx.fixed["strength"][: x.shape[-2], : x.shape[-1]]
+        x -= s * x * x
+        return x
+
+    def inverse(self, y: np.ndarray, fixed: dict | None = None) -> np.ndarray:
+        """``x`` with ``apply(x) = y`` on the monotonic branch (float64), pixel by pixel."""
+        y = np.asarray(y, dtype=np.float64)
+        s = np.asarray(fixed["strength"], dtype=np.float64)[: y.shape[-2], : y.shape[-1]]
+        return 2.0 * y / (1.0 + np.sqrt(np.maximum(1.0 - 4.0 * s * y, 0.0)))
+
+    def log_slope(self, x: np.ndarray, fixed: dict | None = None) -> np.ndarray:
+        """``log |dy/dx|`` at ``x`` (float64), the Jacobian term of ``log_prob``."""
+        x = np.asarray(x, dtype=np.float64)
+        s = np.asarray(fixed["strength"], dtype=np.float64)[: x.shape[-2], : x.shape[-1]]
+        return np.log(np.abs(1.0 - 2.0 * s * x))

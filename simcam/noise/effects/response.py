@@ -65,8 +65,9 @@ class Nonlinearity(Effect):
         x -= np.float32(self.strength) * x * x
         return x
 
-    def inverse(self, y: np.ndarray) -> np.ndarray:
-        """``x`` with ``apply(x) = y`` on the monotonic branch (float64)."""
+    def inverse(self, y: np.ndarray, fixed: dict | None = None) -> np.ndarray:
+        """``x`` with ``apply(x) = y`` on the monotonic branch (float64); ``fixed`` (its fixed-pattern draw,
+        empty) is taken for the composite's sake (``empirical_response`` reads its map from it)."""
         y = np.asarray(y, dtype=np.float64)
         s = float(self.strength)
         if s == 0:
@@ -74,7 +75,7 @@ class Nonlinearity(Effect):
         disc = np.maximum(1.0 - 4.0 * s * y, 0.0)
         return 2.0 * y / (1.0 + np.sqrt(disc))  # = (1 - sqrt(disc)) / (2 s), stable at s -> 0
 
-    def log_slope(self, x: np.ndarray) -> np.ndarray:
+    def log_slope(self, x: np.ndarray, fixed: dict | None = None) -> np.ndarray:
         """``log |dy/dx|`` at ``x`` (float64), the Jacobian term of ``log_prob``."""
         return np.log(np.abs(1.0 - 2.0 * float(self.strength) * np.asarray(x, dtype=np.float64)))
 
