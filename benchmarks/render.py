@@ -133,23 +133,33 @@ def simcam_pipeline(method: str):
 
 
 def simcam_render(path: Path, pipe, *, steps: dict[str, float] | None = None) -> np.ndarray:
-    """DNG -> uint8 sRGB as ``simcam render`` does; optionally accumulate per-step seconds in ``steps``."""
+    """DNG -> uint8 sRGB as ``simcam render`` does (:func:`simcam.render_samples.render_samples`: the demosaic
+    streamed into the fused display tail where the pipeline allows); optionally accumulate per-step seconds in
+    ``steps`` (the streamed part is one step)."""
     from simcam.io.dng import read_dng
-    from simcam.render_samples import fusable_tail, render_tail
+    from simcam.render_samples import fusable_tail, render_samples, streamed_demosaic
 
-    t = _clock()
+    t = [_clock()]
     frame = read_dng(path)
-    t = _add(steps, "read_dng", t)
+    t[0] = _add(steps, "read_dng", t[0])
     start = fusable_tail(pipe.stages)
+    k = streamed_demosaic(pipe.stages, start)
+    fused = pipe.stages[k:] if k < start else pipe.stages[start:]
+    label = ("streamed: " if k < start else "fused tail: ") + " + ".join(st.type for st in fused) + " + uint8"
     seen: dict[str, int] = {}
-    for stage in pipe.stages[:start]:
-        frame = stage(frame)
-        n = seen[stage.type] = seen.get(stage.type, 0) + 1
-        t = _add(steps, stage.type if n == 1 else f"{stage.type}[{n}]", t)
-    tail = pipe.stages[start:]
-    out = render_tail(tail, frame, "uint8").samples
-    _add(steps, "fused tail: " + " + ".join(s.type for s in tail) + " + uint8", t)
-    return out
+    calls = [0]
+
+    def progress(name: str) -> None:
+        i = calls[0]
+        calls[0] += 1
+        if i >= len(pipe.stages) - len(fused):  # the fused part reports its stages together, at its end
+            if i == len(pipe.stages) - len(fused):
+                t[0] = _add(steps, label, t[0])
+            return
+        n = seen[name] = seen.get(name, 0) + 1
+        t[0] = _add(steps, name if n == 1 else f"{name}[{n}]", t[0])
+
+    return render_samples(pipe, frame, "uint8", progress=progress).samples
 
 
 def _clock() -> tuple[float, float]:

@@ -97,7 +97,7 @@ PLANE_OFFSETS = ((0, 0), (0, 1), (1, 0), (1, 1))
 #: The battery, in report order. The effect each one proposes is on the effect's card
 #: (``EffectCard.diagnostics``, :mod:`simcam.calibration.effects`); a diagnostic no card claims
 #: (``dark_checker_jitter``) proposes none; ``col_temporal_excess``, ``frame_mean_drift``, ``dark_frame_jitter``,
-#: ``col_fpn_spectrum_peak`` and ``row_mean_lag1`` propose empirical components.
+#: ``col_fpn_spectrum_peak``, ``row_mean_lag1`` and ``flat_spread_growth`` propose empirical components.
 DIAGNOSTICS = (
     "ptc_curvature", "plane_gain_spread", "row_mean_excess", "row_spectrum_peak", "col_spectrum_peak",
     "col_temporal_excess", "row_mean_lag1", "dark_checker_jitter", "col_fpn_excess", "col_fpn_spectrum_peak", "dsnu_excess",
