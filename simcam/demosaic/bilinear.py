@@ -30,11 +30,8 @@ def demosaic_bilinear(mosaic: np.ndarray, cfa: str = "RGGB", *, sink=None):
         "RGGB", "BGGR", "GRBG" or "GBRG".
 
     sink : callable, optional
-        ``sink(y0, y1, block) -> bool``: instead of an H x W x 3 output, each strip's output rows
-        ``[y0, y1)`` (``block``, (y1 - y0) x W x 3 float32, valid during the call) are handed to it
-        as soon as they are computed, from the strip's thread; the return value is then True if any
-        call returned True. A render streams strips into the display tail this way without holding
-        the whole RGB image (:func:`simcam.render_samples.render_demosaic_tail`).
+        Strip by strip output instead of an H x W x 3 array, as
+        :func:`simcam.demosaic.malvar2004.demosaic_malvar2004`'s ``sink`` (the return value is then a bool).
 
     Returns
     -------

@@ -160,12 +160,9 @@ class EmpiricalResponseCard(EffectCard, name="empirical_response", params=Empiri
 
     def linear_signal(self, p, y, model):
         """The inverse of the mean response (``c_mean``) in DN."""
-        if not p.c_mean:
-            return y
-        from ...noise.effects.response import Nonlinearity as StageNonlinearity
+        from .nonlinearity import response_inverse_dn
 
-        s = model.full_scale_dn
-        return StageNonlinearity(strength=float(np.clip(-p.c_mean, -0.45, 0.45))).inverse(y / s) * s
+        return response_inverse_dn(p.c_mean, y, model.full_scale_dn)
 
     def to_profile(self, p, model):
         return ProfileTerm(effect={"type": self.name, "quantiles": self._strengths(p)})

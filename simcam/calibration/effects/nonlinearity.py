@@ -26,6 +26,16 @@ import numpy as np
 from .card import EffectCard, EffectParams, Fit, ProfileTerm, quantity
 
 
+def response_inverse_dn(c: float, y, s: float):
+    """``x`` (DN above black) with ``x + c x^2 / s = y``: the inverse of the noise stage's ``nonlinearity``
+    (``strength = -c``, clipped to its +-0.45) on ``y`` in DN; ``y`` itself where ``c`` is 0."""
+    if not c:
+        return y
+    from ...noise.effects.response import Nonlinearity as StageNonlinearity
+
+    return StageNonlinearity(strength=float(np.clip(-c, -0.45, 0.45))).inverse(y / s) * s
+
+
 class Nonlinearity(EffectParams):
     c: float = quantity("% at white", "curvature of y = x + c x^2 / (white - black) (dimensionless: the relative "
                         "response error at white; shown in %)", scale=100.0)
@@ -61,12 +71,7 @@ class NonlinearityCard(EffectCard, name="nonlinearity", params=Nonlinearity, nul
 
     def linear_signal(self, p, y, model):
         """The inverse of the noise stage's ``nonlinearity`` (``strength = -c``) in DN."""
-        if not p.c:
-            return y
-        from ...noise.effects.response import Nonlinearity as StageNonlinearity
-
-        s = model.full_scale_dn
-        return StageNonlinearity(strength=float(np.clip(-p.c, -0.45, 0.45))).inverse(y / s) * s
+        return response_inverse_dn(p.c, y, model.full_scale_dn)
 
     def to_profile(self, p, model):
         return ProfileTerm(effect={"type": "nonlinearity", "strength": float(np.clip(-p.c, -0.45, 0.45))})
