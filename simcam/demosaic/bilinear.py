@@ -28,7 +28,6 @@ def demosaic_bilinear(mosaic: np.ndarray, cfa: str = "RGGB", *, sink=None):
         H x W Bayer mosaic (computed in float32); H, W >= 2, odd sizes allowed.
     cfa : str
         "RGGB", "BGGR", "GRBG" or "GBRG".
-
     sink : callable, optional
         Strip by strip output instead of an H x W x 3 array, as
         :func:`simcam.demosaic.malvar2004.demosaic_malvar2004`'s ``sink`` (the return value is then a bool).
