@@ -156,6 +156,7 @@ def banded_tail(stages) -> int:
 
 def render_banded(tail, frame: RawFrame, depth: str) -> Rendered:
     """Run per-pixel stages (and one orientation, moved to the end) on bands of rows, quantising each band."""
+    from .colour.display_kernel import sample_dtype
     from .errors import ImageIOError
     from .parallel import run_bands
     from .stages.orientation import orient
@@ -165,7 +166,7 @@ def render_banded(tail, frame: RawFrame, depth: str) -> Rendered:
     pixel = [s for s in tail if s.type != "orientation"]
     orientation = next((s for s in tail if s.type == "orientation"), None)
     h, w = frame.data.shape[:2]
-    out = np.empty((h, w, 3), depth if depth != "half" else np.float16)
+    out = np.empty((h, w, 3), sample_dtype(depth))
     last: list = []
 
     def band(r0: int, r1: int) -> bool:

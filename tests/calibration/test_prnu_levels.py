@@ -64,7 +64,7 @@ def test_gain_alone_keeps_the_brightest_flats_estimate():
 
 def test_a_per_pixel_nonlinearity_is_not_a_gain():
     d = _capture(2, 0.0, 0.03)
-    ratio, z, icpt, se = spread_growth(d, 0.0, 4095.0 - BLACK)
+    ratio, z, icpt, se, _slope = spread_growth(d, 0.0, 4095.0 - BLACK)
     # relative deviation c_p e / FW grows as the signal: ratio of spreads = 6600 / 1800 = 3.7
     assert ratio == pytest.approx(LEVELS_E[1] / LEVELS_E[0], rel=0.15)
     assert z > LEVEL_Z
@@ -78,7 +78,7 @@ def test_gain_beside_a_per_pixel_nonlinearity_is_kept():
     # relative variances 1e-4 + (0.603 x 0.03 x 0.15)^2 and 1e-4 + (0.603 x 0.03 x 0.55)^2 (c_p half-normal):
     # spreads 1.036 % and 1.407 %, ratio 1.36
     assert p.spread_growth == pytest.approx(1.36, rel=0.08)
-    _, _, icpt, se = spread_growth(_capture(3, 0.01, 0.03), 0.0, 4095.0 - BLACK)
+    _, _, icpt, se, _slope = spread_growth(_capture(3, 0.01, 0.03), 0.0, 4095.0 - BLACK)
     # the intercept of v(L) = sigma^2 + k L^2 through two points is the PRNU's variance (1e-4)
     assert icpt == pytest.approx(1e-4, abs=3 * se)
     # the card keeps the brightest flat's estimate: the PRNU and the growing part at 55 % (1.407 %)

@@ -120,22 +120,17 @@ class EmpiricalResponseCard(EffectCard, name="empirical_response", params=Empiri
 
     def fit(self, d, model, ctx):
         from .nonlinearity import NonlinearityCard
-        from .prnu import LEVEL_Z, _elasticity
+        from .prnu import LEVEL_Z, spread_growth
 
         s = model.full_scale_dn
         nl = model.effects.get("nonlinearity")
-        c_model = nl.c if nl is not None else 0.0
-        pair = dg.flat_level_pair(dg.prnu_by_level(d))
-        if pair is None:
+        growth = spread_growth(d, nl.c if nl is not None else 0.0, s)
+        if growth is None:
             return EmpiricalResponse(c_mean=0.0, c_sd=0.0)
-        lo, hi = pair
-        e = [(_elasticity(c_model, r[0], s) if c_model else 1.0) ** 2 for r in (lo, hi)]
-        vlo, vhi = lo[1] / e[0], hi[1] / e[1]
-        se = float(np.hypot(lo[2] / e[0], hi[2] / e[1]))
-        z = (vhi - vlo) / max(se, 1e-300)
+        z = growth.z
         if not z > LEVEL_Z:
-            return EmpiricalResponse(c_mean=0.0, c_sd=0.0, growth_z=float(z))
-        c_sd = float(np.sqrt((vhi - vlo) / (hi[0] ** 2 - lo[0] ** 2))) * s
+            return EmpiricalResponse(c_mean=0.0, c_sd=0.0, growth_z=z)
+        c_sd = float(np.sqrt(growth.slope)) * s
         dev = curvature_deviations(d, s)
         law = measured_law(dev, c_sd) if dev is not None and dev.size >= 16 else []
         if nl is not None:  # the common bend is nonlinearity's

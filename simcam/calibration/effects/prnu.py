@@ -35,6 +35,8 @@ Profile. ``{type: prnu, sigma}``: the same dimensionless sigma.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from .. import diagnostics as dg
@@ -59,10 +61,21 @@ def _elasticity(c: float, y: float, s: float) -> float:
     return (x * (1 + 2 * c * x / s)) / y
 
 
-def spread_growth(d, c: float, s: float) -> tuple[float, float, float, float] | None:
-    """(ratio of the relative spreads, its z, level-independent relative variance, its standard error) of
-    the brightest flat against the dimmest at 10-80 % of its signal, a nonlinearity ``c`` (full scale
-    ``s``) divided out; None without such a pair of flats."""
+class LevelGrowth(NamedTuple):
+    """:func:`spread_growth`'s result: the flats' relative fixed-pattern variance at two levels, fitted as
+    ``v(L) = intercept + slope L^2`` (L in DN above the darks)."""
+
+    ratio: float  # relative spread of the brighter flat over the dimmer's
+    z: float  # standard errors by which the brighter flat's relative variance exceeds the dimmer's
+    intercept: float  # the level-independent relative variance (a gain's)
+    intercept_se: float
+    slope: float  # the part growing as L^2 (a per-pixel response curvature's: sd(c)^2 / s^2)
+
+
+def spread_growth(d, c: float, s: float) -> LevelGrowth | None:
+    """The relative fixed-pattern variances of the brightest flat and of the dimmest at 10-80 % of its
+    signal, a nonlinearity ``c`` (full scale ``s``) divided out, through ``v(L) = intercept + slope L^2``
+    (:class:`LevelGrowth`); None without such a pair of flats."""
     pair = dg.flat_level_pair(dg.prnu_by_level(d))
     if pair is None:
         return None
@@ -75,7 +88,7 @@ def spread_growth(d, c: float, s: float) -> tuple[float, float, float, float] | 
     icpt = (vlo * a2 - vhi * b2) / (a2 - b2)
     icpt_se = float(np.hypot(a2 * slo, b2 * shi)) / (a2 - b2)
     ratio = float(np.sqrt(max(vhi, 0.0) / vlo)) if vlo > 0 else float("inf")
-    return ratio, float(z), float(icpt), icpt_se
+    return LevelGrowth(ratio, float(z), float(icpt), icpt_se, float((vhi - vlo) / (a2 - b2)))
 
 
 class PrnuCard(GainSigmaCard, name="prnu", params=Prnu, diagnostics=("prnu_excess",), fixed_pattern=True, marginal_rank=40,
@@ -91,11 +104,11 @@ class PrnuCard(GainSigmaCard, name="prnu", params=Prnu, diagnostics=("prnu_exces
             y = float(fm[0].mean() - (dm[0].mean() if dm is not None else np.mean(model.black_dn)))
             sigma /= _elasticity(c, y, model.full_scale_dn)
         growth, ratio = spread_growth(d, c, model.full_scale_dn), None
-        if growth is not None and growth[1] > LEVEL_Z:
+        if growth is not None and growth.z > LEVEL_Z:
             # part of the pattern grows with the signal: a gain only where a level-independent part is left
-            if not growth[2] > 3 * growth[3]:
+            if not growth.intercept > 3 * growth.intercept_se:
                 sigma = 0.0
-            ratio = min(growth[0], 1e6)
+            ratio = min(growth.ratio, 1e6)
         cx = model.effects.get("charge_crosstalk")
         if cx is not None and cx.c > 0:  # the sharing filters the pattern too: its variance is f sigma^2
             from .charge_crosstalk import variance_factor
