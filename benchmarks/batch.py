@@ -138,6 +138,10 @@ def main(argv=None) -> int:
     ap.add_argument("--renders", type=int, default=64)
     ap.add_argument("--size", default="4000x3000", help="render DNG width x height")
     ap.add_argument("--patches", type=int, default=20000)
+    ap.add_argument("--synth-size", default="1024x1024",
+                    help="synth source DNG width x height (4000x3000: camera-sized raws, the noise drawn over 12 MP per item)")
+    ap.add_argument("--synth-distinct", type=int, default=0,
+                    help="distinct synth source files (the others hard links to them; 0: all distinct)")
     ap.add_argument("--bursts", type=int, default=8)
     ap.add_argument("--jobs", default="render,synth,gt")
     ap.add_argument("--workdir", default=None)
@@ -172,12 +176,19 @@ def main(argv=None) -> int:
     if "synth" in jobs:
         per = 250 if not args.quick else 50
         n_src = max(1, args.patches // per)
+        sw, sh = (int(v) for v in args.synth_size.split("x"))
+        if args.quick:
+            sw, sh = 1024, 768
+        distinct = args.synth_distinct or n_src
         srcs = []
         for i in range(n_src):
-            p = work / "synth_in" / f"clean{i:03d}.dng"
+            p = work / f"synth_in_{sw}x{sh}" / f"clean{i:03d}.dng"
             p.parent.mkdir(exist_ok=True)
             if not p.exists():
-                write_synthetic_dng(p, 768 if args.quick else 1024, 1024, seed=i)
+                if i < distinct:
+                    write_synthetic_dng(p, sh, sw, seed=i)
+                else:  # the same pixels as source i % distinct; item i still draws its own noise and crops
+                    os.link(srcs[i % distinct], p)
             srcs.append(p)
         from simcam.trainingset import create_store
 
@@ -189,7 +200,8 @@ def main(argv=None) -> int:
                     "patches": per, "store": str(store)}
             return [Task(str(s), {**base, "source": str(s), "index": i}) for i, s in enumerate(srcs)]
 
-        rows.append(bench("synth", f"{n_src * per} patches (4x32x32) from {n_src} 1 MP DNGs -> Zarr",
+        mp = sw * sh / 1e6
+        rows.append(bench("synth", f"{n_src * per} patches (4x32x32) from {n_src} {mp:.0f} MP DNGs -> Zarr",
                           synth_patches_job, work, synth_tasks, lambda out: [out / "set.zarr"],
                           args.repeats))
     if "gt" in jobs:

@@ -159,26 +159,29 @@ def _worker_env(threads: int) -> dict[str, str]:
     return {v: str(int(threads)) for v in THREAD_VARIABLES}
 
 
-def _fork_server(preload: Sequence[str], threads: int) -> None:
-    """Start local workers from a fork server that has imported ``preload`` (module docstring), with
-    the thread caps in its environment: numba and BLAS read them when they are imported, which is
-    in the server."""
+def _fork_server(preload: Sequence[str], threads: int) -> bool:
+    """Start the fork server local workers are forked from (module docstring), importing
+    ``distributed`` and ``preload``, with the thread caps in its environment (numba and BLAS read
+    them when they are imported, which is in the server). Returns whether workers will start from it.
+
+    It is started before this process imports ``distributed`` itself: the server's imports (the
+    longest step before the first item can run) then overlap with the client's import and with the
+    scheduler's and nannies' start on the other core."""
+    import importlib.util
     import multiprocessing
 
-    import dask
-
-    if "forkserver" not in multiprocessing.get_all_start_methods() or any(
+    if importlib.util.find_spec("distributed") is None or "forkserver" not in multiprocessing.get_all_start_methods() or any(
             k.upper() == "DASK_DISTRIBUTED__WORKER__MULTIPROCESSING_METHOD" for k in os.environ):
-        return
-    dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"})
-    from distributed.utils import get_mp_context
-
-    ctx = get_mp_context()  # dask's own preload list (dask, distributed and what they import) is set here
+        return False
     from multiprocessing import forkserver
 
-    # a server already running keeps the modules it started with; the workers import the rest themselves
+    # a server already running keeps the modules it started with; the workers import the rest themselves.
+    # distributed.utils.get_mp_context later sets dask's own list (distributed and what it imports) on
+    # the running server: no effect then.
     current = list(getattr(forkserver._forkserver, "_preload_modules", []) or [])
-    ctx.set_forkserver_preload(current + [m for m in preload if m not in current])
+    wanted = ["distributed", *preload]
+    multiprocessing.get_context("forkserver").set_forkserver_preload(
+        current + [m for m in wanted if m not in current])
     saved = {v: os.environ.get(v) for v in THREAD_VARIABLES}
     os.environ.update(_worker_env(threads))
     try:
@@ -189,9 +192,10 @@ def _fork_server(preload: Sequence[str], threads: int) -> None:
                 os.environ.pop(v, None)
             else:
                 os.environ[v] = old
+    return True
 
 
-def _client(config: BatchConfig, preload: Sequence[str] = ()):
+def _client(config: BatchConfig, forkserver: bool = False):
     try:
         import dask
         from distributed import Client, LocalCluster
@@ -214,7 +218,8 @@ def _client(config: BatchConfig, preload: Sequence[str] = ()):
         except (OSError, TimeoutError) as exc:
             raise SimcamError(f"--scheduler {address}: cannot reach the dask scheduler ({one_line(exc)})") from None
     workers = config.workers or os.cpu_count() or 1
-    _fork_server(preload, config.threads_per_worker)
+    if forkserver:
+        dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"})
     import importlib.util
 
     dashboard = "127.0.0.1:0" if importlib.util.find_spec("bokeh") else None  # the dashboard needs bokeh
@@ -273,9 +278,11 @@ def run_batch(job: Callable[[Any], dict], tasks: Sequence[Task], config: BatchCo
                 outcomes[i] = execute(job, tasks[i])
                 bar.update(1)
         else:
+            forkserver = not config.scheduler_address() and _fork_server(getattr(job, "preload", ()),
+                                                                         config.threads_per_worker)
             from distributed import as_completed
 
-            client, cluster = _client(config, getattr(job, "preload", ()))
+            client, cluster = _client(config, forkserver)
             try:
                 if client.dashboard_link:
                     echo(f"dask dashboard: {client.dashboard_link}")
