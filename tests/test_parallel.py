@@ -31,3 +31,23 @@ def test_banded_menon2007_equals_colour_demosaicing(cfa):
         warnings.simplefilter("ignore")
         ref = cd.demosaicing_CFA_Bayer_Menon2007(m.astype(np.float64), cfa)
     np.testing.assert_allclose(ours, ref, rtol=1e-6, atol=1e-6)
+
+
+def test_banded_menon2007_propagates_nan_and_inf_as_colour_demosaicing():
+    """The compiled kernel takes the same branch as colour-demosaicing where a neighbour is NaN or
+    infinite (a comparison with NaN is false: the vertical estimate), so the same pixels come out
+    non-finite and the others agree."""
+    cd = pytest.importorskip("colour_demosaicing")
+    rng = np.random.default_rng(3)
+    m = rng.random((2 * BAND + 2 * HALO + 5, 70)).astype(np.float32)
+    m[rng.random(m.shape) < 0.004] = np.nan
+    m[rng.random(m.shape) < 0.002] = np.inf
+    ours = demosaic_menon2007(m, "GBRG")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ref = cd.demosaicing_CFA_Bayer_Menon2007(m.astype(np.float64), "GBRG")
+    np.testing.assert_array_equal(np.isnan(ours), np.isnan(ref))
+    np.testing.assert_array_equal(np.isinf(ours), np.isinf(ref))
+    fin = np.isfinite(ref)
+    assert fin.mean() > 0.5
+    np.testing.assert_allclose(ours[fin], ref[fin], rtol=1e-6, atol=1e-6)
