@@ -203,21 +203,40 @@ def write_image(path: str | Path, data, *, depth: str | int | None = None,
 
 def _write_oiio(path: Path, samples: np.ndarray, dtype: str, comp: str | None, quality: int, kind: str | None,
                 meta, attributes: dict | None) -> None:
-    """Any format through OpenImageIO (everything :func:`_write_tiff` does not take)."""
+    """Any format through OpenImageIO (everything :func:`_write_tiff` does not take); PNG pixels are
+    deflated on threads (:mod:`simcam.io.png_write`) behind OpenImageIO's metadata chunks."""
     h, w, c = samples.shape
     import OpenImageIO as oiio
 
+    ext = path.suffix.lower()
+    png_level = int(comp.partition(":")[2] or 6) if ext == ".png" else None
+    with atomic_output(path, suffix=path.suffix) as tmp:
+        if png_level is not None:  # OpenImageIO writes the metadata of a 1 x 1 image, simcam the pixels
+            _oiio_write(tmp, np.zeros((1, 1, c), samples.dtype), _spec(oiio, 1, 1, c, dtype, ext, comp, quality, kind,
+                                                                       meta, attributes, png_level=0), path)
+            from .png_write import write_png
+
+            try:
+                write_png(tmp, samples, Path(tmp).read_bytes(), png_level)
+            except (OSError, ValueError) as exc:
+                raise ImageIOError(f"{path}: write failed ({type(exc).__name__}: {exc})") from None
+        else:
+            _oiio_write(tmp, samples, _spec(oiio, w, h, c, dtype, ext, comp, quality, kind, meta, attributes), path)
+
+
+def _spec(oiio, w: int, h: int, c: int, dtype: str, ext: str, comp: str | None, quality: int, kind: str | None,
+          meta, attributes: dict | None, png_level: int | None = None):
+    """OpenImageIO's specification of a ``w`` x ``h`` x ``c`` output: type, compression, colour tags, EXIF."""
     type_desc = {"uint8": oiio.UINT8, "uint16": oiio.UINT16, "float32": oiio.FLOAT, "half": oiio.HALF}[dtype]
     spec = oiio.ImageSpec(w, h, c, type_desc)
     # OpenImageIO stamps TIFF/EXR with the write time unless told otherwise: the same render
     # would give different bytes on every run. No DateTime unless the caller (or the capture's
     # DateTimeOriginal, below) gives one.
     spec.attribute("DateTime", "")
-    ext = path.suffix.lower()
     if comp is not None:
         spec.attribute("compression", comp)
     if ext == ".png":  # OpenImageIO's PNG writer takes the zlib level from png:compressionLevel
-        spec.attribute("png:compressionLevel", int(comp.partition(":")[2] or 6))
+        spec.attribute("png:compressionLevel", int(comp.partition(":")[2] or 6) if png_level is None else png_level)
         spec.attribute("png:filter", _PNG_FILTER_SUB)
     if ext in (".jpg", ".jpeg"):
         spec.attribute("Compression", f"jpeg:{int(quality)}")
@@ -227,14 +246,19 @@ def _write_oiio(path: Path, samples: np.ndarray, dtype: str, comp: str | None, q
         spec.attribute(k, v)
     for k, v in (attributes or {}).items():
         spec.attribute(k, v)
-    with atomic_output(path, suffix=path.suffix) as tmp:
-        out = oiio.ImageOutput.create(tmp)
-        if out is None or not out.open(tmp, spec):
-            raise ImageIOError(f"{path}: cannot open for writing ({oiio.geterror() or (out and out.geterror())})")
-        ok = out.write_image(np.ascontiguousarray(samples))
-        out.close()
-        if not ok:
-            raise ImageIOError(f"{path}: write failed ({out.geterror()})")
+    return spec
+
+
+def _oiio_write(tmp, samples: np.ndarray, spec, path: Path) -> None:
+    import OpenImageIO as oiio
+
+    out = oiio.ImageOutput.create(tmp)
+    if out is None or not out.open(tmp, spec):
+        raise ImageIOError(f"{path}: cannot open for writing ({oiio.geterror() or (out and out.geterror())})")
+    ok = out.write_image(np.ascontiguousarray(samples))
+    out.close()
+    if not ok:
+        raise ImageIOError(f"{path}: write failed ({out.geterror()})")
 
 
 def ext_is_tiff(path: Path) -> bool:
