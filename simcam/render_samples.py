@@ -123,6 +123,12 @@ def render_samples(pipe, frame: RawFrame, depth: str, *, seed: int | None = None
         frame = head(frame, seed=seed, index=index, progress=progress) if head is not None else frame
         return _done(render_tail(stages[start:], frame, depth), stages[start:], progress)
     start = banded_tail(stages) if usable else len(stages)
+    if start < len(stages) and stages[start - 1].type == "demosaic" and \
+            stages[start - 1].params.method in stages[start - 1].STREAMING:
+        head = _head(pipe, start - 1)
+        frame = head(frame, seed=seed, index=index, progress=progress) if head is not None else frame
+        return _done(render_demosaic_banded(stages[start - 1], stages[start:], frame, depth), stages[start - 1:],
+                     progress)
     if start < len(stages):
         head = _head(pipe, start)
         frame = head(frame, seed=seed, index=index, progress=progress) if head is not None else frame
@@ -156,44 +162,76 @@ def banded_tail(stages) -> int:
 
 def render_banded(tail, frame: RawFrame, depth: str) -> Rendered:
     """Run per-pixel stages (and one orientation, moved to the end) on bands of rows, quantising each band."""
-    from .colour.display_kernel import sample_dtype
     from .errors import ImageIOError
     from .parallel import run_bands
-    from .stages.orientation import orient
 
     if frame.data.ndim != 3:
         raise ValueError("render_banded: expected an H x W x 3 frame")
-    pixel = [s for s in tail if s.type != "orientation"]
-    orientation = next((s for s in tail if s.type == "orientation"), None)
     h, w = frame.data.shape[:2]
-    out = np.empty((h, w, 3), sample_dtype(depth))
-    last: list = []
+    bands = _BandedTail(tail, h, w, depth)
+    if run_bands(h, lambda r0, r1: bands.encode(frame.data[r0:r1], frame.meta, frame.kind, r0), rows=BANDED_ROWS):
+        raise ImageIOError(f"{frame.meta.source or 'frame'}: image data contains NaN or infinite values")
+    return bands.rendered()
 
-    def band(r0: int, r1: int) -> bool:
-        f = RawFrame(frame.data[r0:r1], frame.meta, kind=frame.kind)
-        for st in pixel:
-            f = st(f)
-        x = f.data
-        if not np.isfinite(x).all():
-            return True
-        if depth in ("uint8", "uint16"):  # as to_samples: round(clip(x, 0, 1) * top), half to even
-            x = np.clip(x, np.float32(0), np.float32(1)) * np.float32(255 if depth == "uint8" else 65535)
-            np.rint(x, out=x)
-        out[r0:r1] = x
-        if r0 == 0:
-            last.append(f)
+
+def render_demosaic_banded(demosaic, tail, frame: RawFrame, depth: str) -> Rendered:
+    """A streaming demosaic (:attr:`simcam.stages.demosaic.Demosaic.STREAMING`) straight into a banded
+    tail: each block of rows the kernel finishes runs through the per-pixel stages while it is in
+    memory, so the H x W x 3 float32 image is never made. The samples are :func:`render_banded`'s on
+    the demosaicked frame, byte for byte (the same stages on the same rows)."""
+    from .errors import ImageIOError
+
+    demosaic.check_input(frame)
+    kind = demosaic.output_kind(frame.kind)
+    h, w = frame.data.shape
+    bands = _BandedTail(tail, h, w, depth)
+    if demosaic.stream(frame, sink=lambda y0, y1, block: bands.encode(block, frame.meta, kind, y0)):
+        raise ImageIOError(f"{frame.meta.source or 'frame'}: image data contains NaN or infinite values")
+    return bands.rendered()
+
+
+class _BandedTail:
+    """The per-pixel stages of a banded tail on blocks of rows of an H x W x 3 frame, quantised into one
+    output; the orientation (at most one) turns the whole output at the end."""
+
+    def __init__(self, tail, h: int, w: int, depth: str):
+        from .colour.display_kernel import sample_dtype
+
+        self.pixel = [s for s in tail if s.type != "orientation"]
+        self.orientation = next((s for s in tail if s.type == "orientation"), None)
+        self.depth = depth
+        self.out = np.empty((h, w, 3), sample_dtype(depth))
+        self.first: list = []
+
+    def encode(self, block: np.ndarray, meta, kind: str, r0: int) -> bool:
+        """Rows ``r0 : r0 + len(block)``, in pieces of :data:`BANDED_ROWS`; True on a non-finite value."""
+        depth = self.depth
+        for q in range(0, block.shape[0], BANDED_ROWS):
+            f = RawFrame(block[q:q + BANDED_ROWS], meta, kind=kind)
+            for st in self.pixel:
+                f = st(f)
+            x = f.data
+            if not np.isfinite(x).all():
+                return True
+            if depth in ("uint8", "uint16"):  # as to_samples: round(clip(x, 0, 1) * top), half to even
+                x = np.clip(x, np.float32(0), np.float32(1)) * np.float32(255 if depth == "uint8" else 65535)
+                np.rint(x, out=x)
+            self.out[r0 + q:r0 + q + x.shape[0]] = x
+            if r0 + q == 0:
+                self.first.append(f)
         return False
 
-    if run_bands(h, band, rows=BANDED_ROWS):
-        raise ImageIOError(f"{frame.meta.source or 'frame'}: image data contains NaN or infinite values")
-    kind, meta = last[0].kind, last[0].meta
-    if orientation is not None:
-        orientation.check_input(RawFrame(np.zeros((1, 1, 3), np.float32), meta, kind=kind))
-        value = orientation.transform_value(meta)
-        out = np.ascontiguousarray(orient(out, value))
-        meta = meta.copy()
-        meta.orientation = 1
-    return Rendered(out, kind, meta, depth)
+    def rendered(self) -> Rendered:
+        from .stages.orientation import orient
+
+        out, kind, meta = self.out, self.first[0].kind, self.first[0].meta
+        if self.orientation is not None:
+            self.orientation.check_input(RawFrame(np.zeros((1, 1, 3), np.float32), meta, kind=kind))
+            value = self.orientation.transform_value(meta)
+            out = np.ascontiguousarray(orient(out, value))
+            meta = meta.copy()
+            meta.orientation = 1
+        return Rendered(out, kind, meta, self.depth)
 
 
 def _head(pipe, start: int):

@@ -189,7 +189,7 @@ def _streamed_pipeline(method, rect, orientation=1):
         {"type": "gamma", "curve": "srgb"}, {"type": "orientation", "value": orientation}]}, source="<test>")
 
 
-@pytest.mark.parametrize("method", ["malvar2004", "bilinear"])
+@pytest.mark.parametrize("method", ["malvar2004", "bilinear", "menon2007"])
 @pytest.mark.parametrize("threads", ["1", "2"])
 def test_streamed_demosaic_equals_the_stage_by_stage_frame_byte_for_byte(method, threads, monkeypatch):
     """The demosaic's strips go straight into the display tail (render_demosaic_tail): the samples are
@@ -254,3 +254,37 @@ def test_streamed_demosaic_errors_and_opcode_fallback():
     again = render_samples(pipe, RawFrame(full.data, meta, kind="raw_dn"), "uint16")
     assert seen == [full.data.shape[:2] + (3,)]  # it got the whole demosaiced image
     assert again.samples.tobytes() == plain.samples.tobytes()
+
+
+@pytest.mark.parametrize("threads", ["1", "2"])
+@pytest.mark.parametrize("orientation", [1, 5])
+def test_demosaic_streamed_into_a_banded_tail_equals_the_banded_render_byte_for_byte(threads, orientation, monkeypatch):
+    """sidd-srgb's Menon 2007 hands its bands straight to the per-pixel tail (render_demosaic_banded):
+    the samples are render_banded's on the demosaicked frame, byte for byte, for an odd-sized mosaic
+    taller than several of the demosaic's bands, any thread count; a NaN is one ImageIOError."""
+    from simcam.demosaic.menon2007 import BAND
+    from simcam.errors import ImageIOError
+    from simcam.frame import RawFrame
+    from simcam.render_samples import banded_tail, render_banded
+
+    monkeypatch.setenv("SIMCAM_THREADS", threads)
+    frame = read_dng(EXAMPLE)
+    pipe = Pipeline.from_yaml("sidd-srgb").with_overrides({  # an odd-sized crop, 397 x 597
+        "crop.region": "explicit", "crop.rect": [2, 2, 399, 599], "orientation.convention": "exif",
+        "orientation.value": orientation})
+    assert 397 > 3 * BAND
+    start = banded_tail(pipe.stages)
+    assert pipe.stages[start - 1].type == "demosaic" and pipe.stages[start - 1].params.method == "menon2007"
+    for depth in ("uint8", "uint16", "float32"):
+        got = render_samples(pipe, frame, depth)
+        ref_frame = frame
+        for st in pipe.stages[:start]:
+            ref_frame = st(ref_frame)
+        ref = render_banded(pipe.stages[start:], ref_frame, depth)
+        assert got.samples.dtype == ref.samples.dtype and got.samples.shape == ref.samples.shape
+        assert got.samples.tobytes() == ref.samples.tobytes()
+        assert got.kind == ref.kind and got.meta.orientation == ref.meta.orientation == 1
+    data = frame.data.copy()
+    data[BAND + 4, 17] = np.nan
+    with pytest.raises(ImageIOError, match="chart.dng: image data contains NaN or infinite values"):
+        render_samples(pipe, RawFrame(data, frame.meta, kind="raw_dn"), "uint8")

@@ -39,7 +39,7 @@ def _colour_codes(cfa: str) -> np.ndarray:
     return np.array(["RGB".index(c) for c in cfa], np.int64)
 
 
-def demosaic_menon2007(mosaic: np.ndarray, cfa: str = "RGGB", *, refining_step: bool = True) -> np.ndarray:
+def demosaic_menon2007(mosaic: np.ndarray, cfa: str = "RGGB", *, refining_step: bool = True, sink=None):
     """Demosaic with DDFAPD (Menon et al. 2007, doi:10.1109/TIP.2006.884928).
 
     Parameters
@@ -50,11 +50,16 @@ def demosaic_menon2007(mosaic: np.ndarray, cfa: str = "RGGB", *, refining_step: 
         "RGGB", "BGGR", "GRBG" or "GBRG".
     refining_step : bool
         Apply the paper's refining step (section III.C).
+    sink : callable, optional
+        ``sink(y0, y1, block) -> bool``: instead of an H x W x 3 output, each band's output rows
+        ``[y0, y1)`` (``block``, (y1 - y0) x W x 3 float32, valid during the call) are handed to it from
+        the band's thread as soon as they are computed; the return value is then True if any call
+        returned True (as :func:`simcam.demosaic.demosaic_malvar2004`'s).
 
     Returns
     -------
     ndarray
-        H x W x 3 float32, not clipped.
+        H x W x 3 float32, not clipped (with ``sink``: the bool above).
 
     Examples
     --------
@@ -63,6 +68,8 @@ def demosaic_menon2007(mosaic: np.ndarray, cfa: str = "RGGB", *, refining_step: 
     >>> out.dtype.name, out.shape
     ('float32', (8, 8, 3))
     """
+    import threading
+
     from ..parallel import run_bands
     from ._menon_kernel import menon_band
 
@@ -70,15 +77,19 @@ def demosaic_menon2007(mosaic: np.ndarray, cfa: str = "RGGB", *, refining_step: 
     m = np.ascontiguousarray(m, dtype=np.float32)
     colour = _colour_codes(cfa)
     h, w = m.shape
-    out = np.empty((h, w, 3), np.float32)
-    if h <= BAND + 2 * HALO:
-        menon_band(m, colour, bool(refining_step), out, 0, h)
-        return out
+    out = np.empty((h, w, 3), np.float32) if sink is None else None
+    local = threading.local()
 
     def band(r0: int, r1: int) -> bool:
         a, b = max(0, r0 - HALO), min(h, r1 + HALO)
-        menon_band(m[a:b], colour, bool(refining_step), out[r0:r1], r0 - a, r1 - a)
-        return False
+        if sink is None:
+            menon_band(m[a:b], colour, bool(refining_step), out[r0:r1], r0 - a, r1 - a)
+            return False
+        buf = getattr(local, "buf", None)
+        if buf is None:
+            buf = local.buf = np.empty((min(BAND, h), w, 3), np.float32)
+        menon_band(m[a:b], colour, bool(refining_step), buf[:r1 - r0], r0 - a, r1 - a)
+        return bool(sink(r0, r1, buf[:r1 - r0]))
 
-    run_bands(h, band, rows=BAND)
-    return out
+    stopped = run_bands(h, band, rows=BAND)
+    return out if sink is None else stopped

@@ -21,14 +21,14 @@ class Demosaic(Stage, type="demosaic", accepts=frozenset({"raw"}), produces="cam
 
     ``method``: ``bilinear``, ``malvar2004`` (default; Malvar, He & Cutler 2004,
     doi:10.1109/ICASSP.2004.1326587) or ``menon2007`` (Menon et al. 2007,
-    doi:10.1109/TIP.2006.884928, via colour-demosaicing; slow).
+    doi:10.1109/TIP.2006.884928, colour-demosaicing's steps compiled with numba).
     """
 
     class Params(StageParams):
         method: Literal["bilinear", "malvar2004", "menon2007"] = "malvar2004"
 
     #: methods whose kernels can hand their output to a sink strip by strip (``stream``)
-    STREAMING = frozenset({"bilinear", "malvar2004"})
+    STREAMING = frozenset({"bilinear", "malvar2004", "menon2007"})
 
     def apply(self, frame: RawFrame, drawn=None) -> RawFrame:
         return frame.evolve(self.stream(frame), kind="camera_rgb", step=self.type)
