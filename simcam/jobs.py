@@ -229,10 +229,10 @@ def bench_job(payload: dict):
 
 # What a batch worker starts with imported (simcam.batch: the fork server imports them once for
 # every local worker): the modules each job imports when it runs.
-render_job.preload = ("simcam.io.dng", "simcam.io.images", "simcam.io.icc", "simcam.pipeline",
+render_job.preload = ("simcam.io.dng", "simcam.io.images", "simcam.io.icc", "simcam.io.png_write", "simcam.pipeline",
                       "simcam.render_samples", "simcam.colour.display_kernel")
 synth_patches_job.preload = ("zarr", "simcam.synth", "simcam.profiles.schema", "simcam.stages.noise",
                              "simcam.noise", "simcam.noise.noise_profile", "simcam.io.normalized", "simcam.training.crops")
-ground_truth_job.preload = ("simcam.groundtruth", "simcam.io.atomic")
+ground_truth_job.preload = ("simcam.groundtruth", "simcam.io.atomic", "simcam.io.dng", "simcam.io.npz", "simcam.raw")
 loop_job.preload = ("simcam.calibration.loop", "simcam.calibration.report")
 bench_job.preload = ("simcam.denoise.benchmark",)

@@ -193,7 +193,7 @@ for m in job.preload:
 payload = json.loads(sys.argv[2])
 if sys.argv[1] == "render_job":
     payload["pipeline"] = Pipeline.from_yaml("srgb").to_dict()
-else:
+elif sys.argv[1] == "synth_patches_job":
     from simcam.trainingset import create_store
     create_store(payload["store"], sources=[payload["source"]], patches=4, patch_size=16, overwrite=True)
 before = set(sys.modules)
@@ -203,7 +203,7 @@ print(json.dumps(sorted(m for m in set(sys.modules) - before
 """
 
 
-@pytest.mark.parametrize("job", ["render_job", "synth_patches_job"])
+@pytest.mark.parametrize("job", ["render_job", "synth_patches_job", "ground_truth_job"])
 def test_job_preload_covers_what_its_first_item_imports(job, inputs, tmp_path):
     """Local workers fork from a server that imported the job's ``preload`` (simcam.batch): a module a
     job imports on its first item is imported by each worker after the cluster started, on the way to
@@ -211,6 +211,13 @@ def test_job_preload_covers_what_its_first_item_imports(job, inputs, tmp_path):
     src = str(inputs / "img0.dng")
     if job == "render_job":
         payload = {"input": src, "output": str(tmp_path / "x.png"), "seed": 0, "index": 0}
+    elif job == "ground_truth_job":
+        r = run_cli("synth", CHART, "-o", tmp_path / "burst", "--profile", PROFILE, "--iso", 800, "--frames", 3,
+                    "--seed", 4)
+        assert r.returncode == 0, r.stderr
+        (tmp_path / "burst" / "clean.dng").unlink()
+        payload = {"burst": str(tmp_path / "burst"), "npz": str(tmp_path / "gt.npz"),
+                   "report": str(tmp_path / "gt.json"), "alignment": "global", "progress": False}
     else:
         payload = {"seed": 1, "profile": str(PROFILE), "isos": [800], "camera": None, "extrapolate": False,
                    "sensor_seed": None, "as_": "raw", "cfa": None, "patch_size": 16, "patches": 4,
