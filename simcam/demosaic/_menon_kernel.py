@@ -78,6 +78,15 @@ def _v3(x, i, j, ri, c0, c1):
 
 
 @njit(inline="always")
+def _kb_step(own, X, Y, i, j, ri, cj, horizontal):
+    """``(own + KB * X) - KB * Y`` along the row (``horizontal``) or the column, each filter rounded to
+    float32, as numpy evaluates ``own + cnv(X, KB) - cnv(Y, KB)``."""
+    if horizontal:
+        return (own + _h3(X, i, j, cj, _KB_0, _KB_1)) - _h3(Y, i, j, cj, _KB_0, _KB_1)
+    return (own + _v3(X, i, j, ri, _KB_0, _KB_1)) - _v3(Y, i, j, ri, _KB_0, _KB_1)
+
+
+@njit(inline="always")
 def _fir_dir(x, i, j, ri, cj, horizontal):
     if horizontal:
         return _h3(x, i, j, cj, _FIR, _FIR)
@@ -159,46 +168,24 @@ def menon_band(x, colour, refining_step, out, keep0, keep1):
             c = colour[(i & 1) * 2 + (j & 1)]
             R[i, j] = x[i, j] if c == 0 else zero
             B[i, j] = x[i, j] if c == 2 else zero
-    # red and blue at the green sites: along the row where the row holds that colour, else along the column
+    # red and blue at the green sites: along the row where the row holds that colour, else along the
+    # column (each reads only sites of its own colour and G: one pass for both)
     for i in range(h):
         red_row = ((i & 1) == 0) == red_row0
         for j in range(w):
-            if colour[(i & 1) * 2 + (j & 1)] != 1:
-                continue
-            g = G[i, j]
-            if red_row:
-                R[i, j] = (g + _h3(R, i, j, cj, _KB_0, _KB_1)) - _h3(G, i, j, cj, _KB_0, _KB_1)
-            else:
-                R[i, j] = (g + _v3(R, i, j, ri, _KB_0, _KB_1)) - _v3(G, i, j, ri, _KB_0, _KB_1)
-    for i in range(h):
-        red_row = ((i & 1) == 0) == red_row0
-        for j in range(w):
-            if colour[(i & 1) * 2 + (j & 1)] != 1:
-                continue
-            g = G[i, j]
-            if not red_row:
-                B[i, j] = (g + _h3(B, i, j, cj, _KB_0, _KB_1)) - _h3(G, i, j, cj, _KB_0, _KB_1)
-            else:
-                B[i, j] = (g + _v3(B, i, j, ri, _KB_0, _KB_1)) - _v3(G, i, j, ri, _KB_0, _KB_1)
-    # red at blue sites, then blue at red sites, in the classifier's direction
+            if colour[(i & 1) * 2 + (j & 1)] == 1:
+                g = G[i, j]
+                R[i, j] = _kb_step(g, R, G, i, j, ri, cj, red_row)
+                B[i, j] = _kb_step(g, B, G, i, j, ri, cj, not red_row)
+    # red at blue sites and blue at red sites, in the classifier's direction (each reads its neighbours,
+    # green sites, only: one pass for both)
     for i in range(h):
         for j in range(w):
-            if colour[(i & 1) * 2 + (j & 1)] != 2:
-                continue
-            b = B[i, j]
-            if M[i, j]:
-                R[i, j] = (b + _h3(R, i, j, cj, _KB_0, _KB_1)) - _h3(B, i, j, cj, _KB_0, _KB_1)
-            else:
-                R[i, j] = (b + _v3(R, i, j, ri, _KB_0, _KB_1)) - _v3(B, i, j, ri, _KB_0, _KB_1)
-    for i in range(h):
-        for j in range(w):
-            if colour[(i & 1) * 2 + (j & 1)] != 0:
-                continue
-            r = R[i, j]
-            if M[i, j]:
-                B[i, j] = (r + _h3(B, i, j, cj, _KB_0, _KB_1)) - _h3(R, i, j, cj, _KB_0, _KB_1)
-            else:
-                B[i, j] = (r + _v3(B, i, j, ri, _KB_0, _KB_1)) - _v3(R, i, j, ri, _KB_0, _KB_1)
+            c = colour[(i & 1) * 2 + (j & 1)]
+            if c == 2:
+                R[i, j] = _kb_step(B[i, j], R, B, i, j, ri, cj, M[i, j])
+            elif c == 0:
+                B[i, j] = _kb_step(R[i, j], B, R, i, j, ri, cj, M[i, j])
     if refining_step:
         _refine(R, G, B, M, colour, red_row0, ri, cj)
     for i in range(keep0, keep1):
