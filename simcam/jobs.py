@@ -48,8 +48,13 @@ def render_file(input: str | Path, output: str | Path, *, pipeline: Any = "srgb"
     pipe = pipeline if isinstance(pipeline, Pipeline) else (
         Pipeline.from_dict(pipeline, source="<batch>") if isinstance(pipeline, dict) else Pipeline.from_yaml(pipeline))
     dtype = resolve_depth(output, depth)
-    out = render_samples(pipe, read_dng(input) if frame is None else frame, dtype, seed=seed, index=index,
-                         progress=progress)
+    warming = pipe.warm_in_background()  # e.g. numba's set-up for Menon 2007 while the DNG is read
+    try:
+        out = render_samples(pipe, read_dng(input) if frame is None else frame, dtype, seed=seed, index=index,
+                             progress=progress)
+    finally:
+        if warming is not None:
+            warming.join()
     write_image(output, out, depth=dtype, protect=(input,), attributes=attributes, quality=quality,
                 compression=compression, thumbnail=thumbnail)
     h, w = out.samples.shape[:2]

@@ -155,6 +155,28 @@ class Pipeline:
         return kind
 
     # -- running -------------------------------------------------------------
+    def warm_in_background(self):
+        """Start a thread that runs the one-time set-up of the stages that have one (``stage.warm_up()``
+        returns it, e.g. loading a compiled kernel), so that it overlaps what the caller does next
+        (reading the input); returns the thread (join it before returning) or None when no stage has
+        one. A failure there is left to the stage's own call, which raises it with its message."""
+        import threading
+
+        fns = [f for f in (getattr(st, "warm_up", lambda: None)() for st in self.stages) if f is not None]
+        if not fns:
+            return None
+
+        def run():
+            for fn in fns:
+                try:
+                    fn()
+                except Exception:  # noqa: BLE001,S110 - the stage's own call reports it
+                    pass
+
+        thread = threading.Thread(target=run, name="simcam-warm", daemon=True)
+        thread.start()
+        return thread
+
     def __call__(self, frame: RawFrame, *, seed: int | None = None, epoch: int = 0,
                  index: int = 0, progress: Callable[[str], None] | None = None) -> RawFrame:
         """Run the pipeline on one frame.

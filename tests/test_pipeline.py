@@ -163,3 +163,30 @@ def test_overrides():
 def test_build_stage_requires_type():
     with pytest.raises(PipelineError, match="'type' key"):
         build_stage({"method": "x"}, where="stages[0]")
+
+
+def test_warm_in_background_runs_the_stages_warm_up_and_swallows_its_failure(monkeypatch):
+    """Menon 2007's demosaic loads its compiled kernel on a thread while the input is read (numba's
+    once-per-process set-up); pipelines without such a stage start no thread; a warm-up that fails is
+    left to the stage's own call (no traceback from the thread)."""
+    import threading
+
+    from simcam.stages.demosaic import Demosaic
+
+    assert Pipeline.from_yaml("srgb").warm_in_background() is None
+    sidd = Pipeline.from_yaml("sidd-srgb")
+    t = sidd.warm_in_background()
+    assert isinstance(t, threading.Thread) and t.daemon
+    t.join(120)
+    assert not t.is_alive()
+    import numba  # noqa: F401  (imported by the warm-up)
+
+    def boom():
+        raise RuntimeError("no compiler here")
+
+    monkeypatch.setattr(Demosaic, "warm_up", lambda self: boom)
+    errors = []
+    monkeypatch.setattr(threading, "excepthook", lambda args: errors.append(args))
+    t = sidd.warm_in_background()
+    t.join(30)
+    assert errors == []

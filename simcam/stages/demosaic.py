@@ -33,6 +33,16 @@ class Demosaic(Stage, type="demosaic", accepts=frozenset({"raw"}), produces="cam
     def apply(self, frame: RawFrame, drawn=None) -> RawFrame:
         return frame.evolve(self.stream(frame), kind="camera_rgb", step=self.type)
 
+    def warm_up(self):
+        """What loads Menon 2007's compiled kernel ahead of use (numba sets up its compiler context on the
+        first call in a process, ~0.6 s even from its on-disk cache; :meth:`Pipeline.warm_in_background`
+        runs it while the input is read); None for the other methods."""
+        if self.params.method != "menon2007":
+            return None
+        from ..demosaic._menon_kernel import warm
+
+        return warm
+
     def stream(self, frame: RawFrame, sink=None):
         """The kernel on ``frame``: the H x W x 3 RGB, or with ``sink`` (methods in :attr:`STREAMING`)
         each strip's rows handed to ``sink(y0, y1, block)`` and True if a call returned True."""
