@@ -209,7 +209,8 @@ def _write_oiio(path: Path, samples: np.ndarray, dtype: str, comp: str | None, q
     import OpenImageIO as oiio
 
     ext = path.suffix.lower()
-    png_level = int(comp.partition(":")[2] or 6) if ext == ".png" else None
+    # PNG: simcam deflates the pixels (unless extra OpenImageIO attributes could change how they are stored)
+    png_level = int(comp.partition(":")[2] or 6) if ext == ".png" and not attributes else None
     with atomic_output(path, suffix=path.suffix) as tmp:
         if png_level is not None:  # OpenImageIO writes the metadata of a 1 x 1 image, simcam the pixels
             _oiio_write(tmp, np.zeros((1, 1, c), samples.dtype), _spec(oiio, 1, 1, c, dtype, ext, comp, quality, kind,

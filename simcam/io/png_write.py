@@ -94,6 +94,10 @@ def assemble_png(template: bytes, samples: np.ndarray, level: int) -> bytes:
     ihdr = struct.pack(">II", w, h) + chunks[0][1][8:]
     if ihdr[10:] != b"\x00\x00\x00":  # compression, filter method, interlace
         raise ValueError("PNG template: expected deflate, adaptive filtering and no interlace")
+    c = samples.shape[2]
+    if ihdr[8] != 8 * samples.dtype.itemsize or ihdr[9] != {1: 0, 2: 4, 3: 2, 4: 6}.get(c):
+        raise ValueError(f"PNG template: bit depth {ihdr[8]}, colour type {ihdr[9]}; expected "
+                         f"{8 * samples.dtype.itemsize}-bit samples in {c} channels")
     first_idat = next(i for i, (k, _) in enumerate(chunks) if k == b"IDAT")
     stream = idat_stream(samples, level)
     idat = b"".join(_chunk(b"IDAT", stream[i:i + (1 << 20)]) for i in range(0, len(stream), 1 << 20))

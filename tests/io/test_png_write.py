@@ -76,3 +76,20 @@ def test_a_damaged_png_is_refused_by_the_chunk_reader(tmp_path):
         png_chunks(bytes(bad))
     with pytest.raises(ValueError, match="truncated|CRC|length"):
         png_chunks(data[:-7])
+
+
+def test_a_template_of_another_sample_layout_is_refused():
+    """The pixels are encoded for the template's IHDR: a template of another bit depth or channel count
+    (e.g. an OpenImageIO attribute that changed it) is an error, never a file of wrong pixels."""
+    import tempfile
+    from pathlib import Path
+
+    from simcam.io.png_write import assemble_png
+
+    with tempfile.TemporaryDirectory() as d:
+        t8 = write_image(Path(d) / "t.png", np.zeros((1, 1, 3), np.uint8)).read_bytes()
+        assemble_png(t8, np.zeros((4, 4, 3), np.uint8), 1)
+        with pytest.raises(ValueError, match="bit depth 8, colour type 2; expected 16-bit samples in 3"):
+            assemble_png(t8, np.zeros((4, 4, 3), np.uint16), 1)
+        with pytest.raises(ValueError, match="expected 8-bit samples in 4 channels"):
+            assemble_png(t8, np.zeros((4, 4, 4), np.uint8), 1)
