@@ -13,8 +13,8 @@ site (:mod:`simcam.demosaic._menon_kernel`; the filters round as scipy's do). It
 agrees with that function within float32 rounding, without importing
 colour-science (seconds of start-up) and at a quarter of its memory. Against
 the numpy transcription it replaced (full-image ``np.where`` and scipy passes)
-the output is the same bytes and a 12 MP mosaic takes ~4x less time
-(``benchmarks/render.py``).
+the output is the same bytes (NaN where it gave NaN) and a band takes ~4x
+less time (the ``sidd-srgb`` render of ``benchmarks/render.py`` uses it).
 
 Every output pixel depends on input rows at most :data:`HALO` rows away, so
 the image is processed in bands of :data:`BAND` rows (each with ``HALO`` rows of
