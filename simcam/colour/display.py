@@ -87,7 +87,9 @@ def srgb_oetf(x: np.ndarray) -> np.ndarray:
 def power_encode(x: np.ndarray, exponent: float) -> np.ndarray:
     """``sign(x) * |x|^exponent`` (pure power "gamma", e.g. exponent 1/2.2), float32."""
     x = np.asarray(x, dtype=np.float32)
-    return (np.sign(x) * np.power(np.abs(x), np.float32(exponent))).astype(np.float32)
+    y = np.power(np.abs(x), np.float32(exponent))
+    y *= np.sign(x)  # in place: the same products as sign(x) * |x|^e, two passes fewer
+    return y
 
 
 # -- tone curves ------------------------------------------------------------------------------
@@ -98,7 +100,11 @@ def tone_smoothstep(x: np.ndarray) -> np.ndarray:
     The cubic is monotonic only on [0, 1], hence the clip. Range [0, 1]. float32.
     """
     x = np.clip(np.asarray(x, dtype=np.float32), 0.0, 1.0)
-    return (x * x * (3.0 - 2.0 * x)).astype(np.float32)
+    t = np.multiply(x, np.float32(2.0))
+    np.subtract(np.float32(3.0), t, out=t)  # 3 - 2 x
+    y = x * x
+    y *= t  # (x x) (3 - 2 x), as x * x * (3.0 - 2.0 * x) evaluates, in float32, without the extra passes
+    return y
 
 
 #: Hable's Uncharted 2 curve constants: shoulder strength A, linear strength B, linear
