@@ -1,12 +1,16 @@
-"""Menon et al. (2007) DDFAPD on one row band, compiled with numba.
+"""Menon, Andriani & Calvagno (2007) DDFAPD on one row band, compiled with numba.
 
-The steps, kernels and border rules of colour-demosaicing's ``demosaicing_CFA_Bayer_Menon2007``
-(and of :mod:`simcam.demosaic.menon2007`'s numpy transcription of it), computed site by site in
-one compiled pass per step instead of full-image numpy passes: each interpolation is evaluated
-only at the sites that use it (numpy's ``np.where`` evaluates both branches everywhere).
+Menon, D., Andriani, S. and Calvagno, G. (2007). "Demosaicing with directional filtering and a
+posteriori decision." IEEE Trans. Image Processing 16(1), 132-141 (with the refining step of its
+section III.C).
 
-The arithmetic follows scipy.ndimage exactly, so that the result is the numpy transcription's to
-the bit: the 1-D filters (all symmetric) accumulate in float64 in scipy's order for symmetric
+The steps, kernels and border rules of colour-demosaicing's ``demosaicing_CFA_Bayer_Menon2007``,
+computed site by site in one compiled pass per step instead of full-image numpy passes: each
+interpolation is evaluated only at the sites that use it (``np.where`` evaluates both branches
+everywhere). simcam's previous float32 numpy transcription (scipy.ndimage filters on whole bands)
+gave the same values bit for bit on finite data.
+
+The arithmetic follows scipy.ndimage exactly: the 1-D filters (all symmetric) accumulate in float64 in scipy's order for symmetric
 kernels, ``x[i] w[0] + (x[i - 2] + x[i + 2]) w[2] + (x[i - 1] + x[i + 1]) w[1]``, at ``mode="mirror"``
 (``d c b | a b c d | c b a``); the 5 x 5 directional classifier accumulates in float64 over the
 non-zero taps of the flipped kernel in C order, zero outside (``mode="constant"``); every filter
