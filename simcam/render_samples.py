@@ -123,8 +123,7 @@ def render_samples(pipe, frame: RawFrame, depth: str, *, seed: int | None = None
         frame = head(frame, seed=seed, index=index, progress=progress) if head is not None else frame
         return _done(render_tail(stages[start:], frame, depth), stages[start:], progress)
     start = banded_tail(stages) if usable else len(stages)
-    if start < len(stages) and stages[start - 1].type == "demosaic" and \
-            stages[start - 1].params.method in stages[start - 1].STREAMING:
+    if start < len(stages) and streamed_demosaic(stages, start) == start - 1:  # the demosaic right before it
         head = _head(pipe, start - 1)
         frame = head(frame, seed=seed, index=index, progress=progress) if head is not None else frame
         return _done(render_demosaic_banded(stages[start - 1], stages[start:], frame, depth), stages[start - 1:],

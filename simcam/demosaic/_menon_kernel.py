@@ -242,7 +242,8 @@ def _refine(R, G, B, M, colour, red_row0, ri, cj):
             else:
                 R[i, j] = g + _v3(R_G, i, j, ri, _KB_0, _KB_1)
                 B[i, j] = g + _h3(B_G, i, j, cj, _KB_0, _KB_1)
-    # red at blue sites and blue at red sites from R - B
+    # red at blue sites and blue at red sites from R - B (blue at a red site reads R there, which the red
+    # update at blue sites leaves as it is: one pass for both)
     R_B = R - B
     for i in range(h):
         for j in range(w):
@@ -252,10 +253,7 @@ def _refine(R, G, B, M, colour, red_row0, ri, cj):
                     R[i, j] = B[i, j] + _h3(R_B, i, j, cj, _FIR, _FIR)
                 else:
                     R[i, j] = B[i, j] + _v3(R_B, i, j, ri, _FIR, _FIR)
-    for i in range(h):
-        for j in range(w):
-            c = colour[(i & 1) * 2 + (j & 1)]
-            if c == 0:
+            elif c == 0:
                 if M[i, j]:
                     B[i, j] = R[i, j] - _h3(R_B, i, j, cj, _FIR, _FIR)
                 else:

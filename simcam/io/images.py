@@ -209,10 +209,11 @@ def _write_oiio(path: Path, samples: np.ndarray, dtype: str, comp: str | None, q
     import OpenImageIO as oiio
 
     ext = path.suffix.lower()
-    # PNG: simcam deflates the pixels (unless extra OpenImageIO attributes could change how they are stored)
-    png_level = int(comp.partition(":")[2] or 6) if ext == ".png" and not attributes else None
+    png_level = int(comp.partition(":")[2] or 6) if ext == ".png" else None  # the zlib level
     with atomic_output(path, suffix=path.suffix) as tmp:
-        if png_level is not None:  # OpenImageIO writes the metadata of a 1 x 1 image, simcam the pixels
+        # PNG: simcam deflates the pixels (unless extra OpenImageIO attributes could change how they are
+        # stored); OpenImageIO writes the metadata, as the chunks of a 1 x 1 image
+        if png_level is not None and not attributes:
             _oiio_write(tmp, np.zeros((1, 1, c), samples.dtype), _spec(oiio, 1, 1, c, dtype, ext, comp, quality, kind,
                                                                        meta, attributes, png_level=0), path)
             from .png_write import write_png
@@ -222,12 +223,14 @@ def _write_oiio(path: Path, samples: np.ndarray, dtype: str, comp: str | None, q
             except (OSError, ValueError) as exc:
                 raise ImageIOError(f"{path}: write failed ({type(exc).__name__}: {exc})") from None
         else:
-            _oiio_write(tmp, samples, _spec(oiio, w, h, c, dtype, ext, comp, quality, kind, meta, attributes), path)
+            _oiio_write(tmp, samples, _spec(oiio, w, h, c, dtype, ext, comp, quality, kind, meta, attributes,
+                                            png_level=png_level), path)
 
 
 def _spec(oiio, w: int, h: int, c: int, dtype: str, ext: str, comp: str | None, quality: int, kind: str | None,
           meta, attributes: dict | None, png_level: int | None = None):
-    """OpenImageIO's specification of a ``w`` x ``h`` x ``c`` output: type, compression, colour tags, EXIF."""
+    """OpenImageIO's specification of a ``w`` x ``h`` x ``c`` output: type, compression (``png_level``: the
+    zlib level of a PNG), colour tags, EXIF."""
     type_desc = {"uint8": oiio.UINT8, "uint16": oiio.UINT16, "float32": oiio.FLOAT, "half": oiio.HALF}[dtype]
     spec = oiio.ImageSpec(w, h, c, type_desc)
     # OpenImageIO stamps TIFF/EXR with the write time unless told otherwise: the same render
@@ -237,7 +240,7 @@ def _spec(oiio, w: int, h: int, c: int, dtype: str, ext: str, comp: str | None, 
     if comp is not None:
         spec.attribute("compression", comp)
     if ext == ".png":  # OpenImageIO's PNG writer takes the zlib level from png:compressionLevel
-        spec.attribute("png:compressionLevel", int(comp.partition(":")[2] or 6) if png_level is None else png_level)
+        spec.attribute("png:compressionLevel", png_level)
         spec.attribute("png:filter", _PNG_FILTER_SUB)
     if ext in (".jpg", ".jpeg"):
         spec.attribute("Compression", f"jpeg:{int(quality)}")

@@ -98,11 +98,13 @@ def assemble_png(template: bytes, samples: np.ndarray, level: int) -> bytes:
     if ihdr[8] != 8 * samples.dtype.itemsize or ihdr[9] != {1: 0, 2: 4, 3: 2, 4: 6}.get(c):
         raise ValueError(f"PNG template: bit depth {ihdr[8]}, colour type {ihdr[9]}; expected "
                          f"{8 * samples.dtype.itemsize}-bit samples in {c} channels")
-    first_idat = next(i for i, (k, _) in enumerate(chunks) if k == b"IDAT")
+    first_idat = next((i for i, (k, _) in enumerate(chunks) if k == b"IDAT"), None)
+    if first_idat is None:
+        raise ValueError("PNG template: no IDAT chunk")
     stream = idat_stream(samples, level)
     idat = b"".join(_chunk(b"IDAT", stream[i:i + (1 << 20)]) for i in range(0, len(stream), 1 << 20))
     before = chunks[1:first_idat]
-    after = [c for c in chunks[first_idat:-1] if c[0] != b"IDAT"]
+    after = [ck for ck in chunks[first_idat:-1] if ck[0] != b"IDAT"]
     return (_SIGNATURE + _chunk(b"IHDR", ihdr) + b"".join(_chunk(k, p) for k, p in before) + idat
             + b"".join(_chunk(k, p) for k, p in after) + _chunk(b"IEND", b""))
 

@@ -50,7 +50,7 @@ def test_metadata_chunks_are_those_openimageio_writes_for_the_whole_image(tmp_pa
     a = _image((150, 64, 3), np.uint8)
     ours = write_image(tmp_path / "ours.png", a, kind="display", meta=meta)
     ref = tmp_path / "ref.png"
-    _oiio_write(str(ref), a, _spec(oiio, 64, 150, 3, "uint8", ".png", "zip:1", 95, "display", meta, None), ref)
+    _oiio_write(str(ref), a, _spec(oiio, 64, 150, 3, "uint8", ".png", "zip:1", 95, "display", meta, None, png_level=1), ref)
     ck_ours = png_chunks(ours.read_bytes())
     ck_ref = png_chunks(ref.read_bytes())
     assert [c for c in ck_ours if c[0] != b"IDAT"] == [c for c in ck_ref if c[0] != b"IDAT"]
@@ -93,3 +93,8 @@ def test_a_template_of_another_sample_layout_is_refused():
             assemble_png(t8, np.zeros((4, 4, 3), np.uint16), 1)
         with pytest.raises(ValueError, match="expected 8-bit samples in 4 channels"):
             assemble_png(t8, np.zeros((4, 4, 4), np.uint8), 1)
+        from simcam.io.png_write import _SIGNATURE, _chunk
+
+        no_idat = _SIGNATURE + b"".join(_chunk(k, v) for k, v in png_chunks(t8) if k != b"IDAT")
+        with pytest.raises(ValueError, match="no IDAT chunk"):
+            assemble_png(no_idat, np.zeros((4, 4, 3), np.uint8), 1)
