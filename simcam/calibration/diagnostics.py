@@ -60,6 +60,7 @@ dark_frame_jitter       empirical_offset    var of dark frame means / what rows,
 dark_tail_mass          heavy_tail_read     fraction of dark residuals beyond 4 IQR-sigma
 dark_ppcc_lambda        heavy_tail_read     Tukey-lambda shape maximising the PPCC of dark residuals
 code_occupancy          quantization        used / possible integer codes in the central 98 % of darks
+                                            (of the dimmest flat where the darks sit on one code)
 code_width_spread       adc_dnl             relative spread of the ADC's code widths: histogram of the
                                             codes of darks and the dimmest flat (those spread over >= 3
                                             codes), each code's count against a local quadratic
@@ -1269,14 +1270,33 @@ def dark_ppcc_lambda(d):
     return ppcc_lambda(x)
 
 
-def code_occupancy(d: CaptureData):
-    src = d.darks or (sorted(d.flats, key=lambda a: float(a.mean()))[:1])
-    if not src:
-        return None
+def _central_codes(src: list[np.ndarray]) -> np.ndarray:
+    """The codes (rounded values) used in the central 98 % of the values of ``src``."""
     v = np.concatenate([s.ravel() for s in src])
     lo, hi = np.percentile(v, [1, 99])
-    inside = v[(v >= lo) & (v <= hi)]
-    codes = np.unique(np.round(inside))
+    return np.unique(np.round(v[(v >= lo) & (v <= hi)]))
+
+
+def code_grid_codes(d: CaptureData) -> np.ndarray | None:
+    """The codes from which the ADC's grid is read: those used in the central 98 % of the darks, or,
+    where the darks sit on one code (a read noise far below a coarse ADC's step: they show no grid), of
+    the dimmest flat; None without darks or flats."""
+    if "code_grid" in d.cache:
+        return d.cache["code_grid"]
+    codes = None
+    for src in (d.darks, sorted(d.flats, key=lambda a: float(a.mean()))[:1]):
+        if src:
+            codes = _central_codes(src)
+            if codes.size > 1:
+                break
+    d.cache["code_grid"] = codes
+    return codes
+
+
+def code_occupancy(d: CaptureData):
+    codes = code_grid_codes(d)
+    if codes is None:
+        return None
     span = codes.max() - codes.min() + 1
     return float(codes.size / span) if span > 1 else 1.0
 
@@ -1595,8 +1615,8 @@ def resolution(name: str, d: CaptureData) -> float:
         dm = d.dark_map()
         return 1.0 / (4 * dm[2]) if dm is not None else 0.0
     if name == "code_occupancy":  # one code of the span
-        src = d.darks or d.flats
-        span = float(np.percentile(src[0], 99) - np.percentile(src[0], 1)) + 1 if src else 1.0
+        codes = code_grid_codes(d)
+        span = float(codes.max() - codes.min()) + 1 if codes is not None else 1.0
         return 1.0 / max(span, 1.0)
     return 1e-12
 

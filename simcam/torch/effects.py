@@ -266,22 +266,23 @@ def charge_crosstalk(group: Group, x, ctx: Ctx, st: EffectState):
     return charge_share(x - st.read, c, d) + st.read
 
 
-def _codes(group: Group, x, ctx: Ctx, st: EffectState, first_code):
+def _codes(group: Group, x, ctx: Ctx, st: EffectState, first_code, step=lambda e: 1.0):
     rng = ctx.scalar(group, lambda e: e.range_dn, dtype=torch.float64)
     off = ctx.scalar(group, lambda e: e.offset_dn, dtype=torch.float64)
-    analog = (x.detach().double() * rng + off).contiguous()
+    q = ctx.scalar(group, step, dtype=torch.float64)
+    analog = ((x.detach().double() * rng + off) / q).contiguous()
     edges = st.per_uniq("edges")
 
     def one(u, a):
         return torch.searchsorted(edges[u], a.reshape(-1), right=True).reshape(a.shape).double()
 
     code = _by_model(group, analog, one) + ctx.scalar(group, first_code, dtype=torch.float64)
-    return ((code - off) / rng).to(x.dtype)
+    return ((code * q - off) / rng).to(x.dtype)
 
 
 def adc_dnl(group: Group, x, ctx: Ctx, st: EffectState):
     """The ADC code of each value given the sensor's fixed transition levels (no gradient)."""
-    return _codes(group, x, ctx, st, lambda e: 0.0)
+    return _codes(group, x, ctx, st, lambda e: 0.0, step=lambda e: e.step_dn)
 
 
 def empirical_code(group: Group, x, ctx: Ctx, st: EffectState):

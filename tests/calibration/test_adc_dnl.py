@@ -50,10 +50,34 @@ def test_too_few_codes_is_not_applicable():
     assert value is None and "ADC codes" in reason
 
 
-def test_adc_dnl_replaces_the_quantiser():
-    assert excluded_by("adc_dnl", ["dsnu", "quantization"]) == "quantization"
-    assert excluded_by("quantization", ["adc_dnl"]) == "adc_dnl"
-    assert excluded_by("dsnu", ["adc_dnl"]) is None
+def test_adc_dnl_sits_beside_the_quantiser_on_its_grid():
+    """A coarse ADC has unequal codes too: the loop may hold both, the noise stage's ``adc_dnl`` of step 8
+    puts every value on the 8-DN grid (the quantiser after it changes nothing), and its codes' counts follow
+    unequal widths (equal widths are refuted by the counts, binomial around the Gaussian density)."""
+    from scipy.stats import norm
+
+    from simcam.noise.base import NoiseCondition, model_from_entry
+
+    assert excluded_by("adc_dnl", ["dsnu", "quantization"]) is None
+    assert excluded_by("quantization", ["adc_dnl"]) is None
+    fs, off, step = 4000.0, 64.0, 8.0
+    dnl = {"type": "adc_dnl", "range_dn": fs, "offset_dn": off, "bits": 10, "dnl_sigma": 0.25, "step_dn": step}
+    quant = {"type": "quantization", "range_dn": fs, "step_dn": step, "offset_dn": off}
+    x = np.full((256, 256), 0.3, np.float32)
+    cond = NoiseCondition(cfa="RGGB", source="test")
+    out = {}
+    for name, effects in (("dnl", [dnl]), ("both", [dnl, quant])):
+        m = model_from_entry({"type": "composite", "base": {"type": "gaussian", "sigma": 0.01}, "effects": effects,
+                              "sensor_seed": 3}, where="test")
+        out[name] = m.sample_frames(x, cond, np.random.default_rng(1), 4).astype(np.float64) * fs + off
+    np.testing.assert_array_equal(out["dnl"], out["both"])
+    codes = np.round(out["dnl"] / step)
+    np.testing.assert_allclose(codes * step, out["dnl"], atol=1e-6)
+    mu, sd = (0.3 * fs + off) / step, 0.01 * fs / step  # in codes
+    k = np.arange(int(mu - 1.5 * sd), int(mu + 1.5 * sd) + 1)
+    counts = np.array([(codes == c).sum() for c in k])
+    ideal = codes.size * (norm.cdf(k + 0.5, mu, sd) - norm.cdf(k - 0.5, mu, sd))
+    assert np.abs((counts - ideal) / np.sqrt(ideal)).max() > 6  # the widths are unequal
 
 
 def test_loop_fits_the_dnl_of_the_test_generator():

@@ -207,6 +207,9 @@ class Quantization(Effect):
 
     def adc(self, m, v, ctx):
         from .sensor import quantise
+        dnl = next((e for e in m.effects if e.name == "adc_dnl"), None)
+        if dnl is not None:  # a coarse ADC whose codes have unequal widths: the DNL acts on its codes
+            return dnl.codes(v / np.float32(self.step_dn)) * np.float32(self.step_dn)
         return quantise(v, self.step_dn)
 
 
@@ -363,7 +366,9 @@ class StuckPixels(Effect):
 class AdcDNL(Effect):
     """ADC differential non-linearity: code transition levels displaced by ``inl_dn`` (uniform
     random per code) plus a ``major_dn`` error at every 64-code major carry (SAR capacitor mismatch),
-    so codes have unequal widths (DNL_k = w_k - 1). Mid-tread ideal code k spans [k-0.5, k+0.5)."""
+    so codes have unequal widths (DNL_k = w_k - 1). Mid-tread ideal code k spans [k-0.5, k+0.5).
+    Beside ``quantization`` the ADC is the coarse one: the displacements are fractions of its code
+    (``step_dn`` DN), and its codes are ``step_dn`` apart."""
     name, order = "adc_dnl", 91
     ranges: ClassVar[dict] = {"inl_dn": (0.1, 0.45), "major_dn": (0.0, 0.4)}
 
@@ -375,8 +380,12 @@ class AdcDNL(Effect):
         self.edges = (k + 0.5 + d).astype(np.float64)  # upper edge of code k
         self.edges = np.maximum.accumulate(self.edges)
 
-    def adc(self, m, v, ctx):
+    def codes(self, v):
+        """The codes of values ``v`` in code widths (code k spans ``[edges[k-1], edges[k])``)."""
         return np.searchsorted(self.edges, v.ravel(), side="right").reshape(v.shape).astype(np.float32)
+
+    def adc(self, m, v, ctx):
+        return self.codes(v)
 
     def truth(self):
         d = super().truth()

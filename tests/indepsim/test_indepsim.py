@@ -295,6 +295,24 @@ def test_adc_dnl_code_occupancy_follows_code_widths():
     assert np.corrcoef(counts / ideal, width)[0, 1] > 0.8
 
 
+def test_adc_dnl_beside_quantization_acts_on_the_coarse_codes():
+    # both effects are ADC read-outs: the DNL must not be dropped (the first ADC hook used to win alone)
+    sp, m, f = _one({"quantization": {"step_dn": 8}, "adc_dnl": {"inl_dn": 0.4, "major_dn": 0.0}},
+                    kind="flat", t=0.01, level=0.3, n=8, bits=12, black_dn=256.0)
+    assert np.all(f % 8 == 0)
+    e = next(x for x in m.effects if x.name == "adc_dnl")
+    mu, sd = f.mean() / 8, f.std() / 8  # in coarse codes
+    codes = np.arange(int(mu - sd), int(mu + sd) + 1)
+    counts = np.bincount((f // 8).astype(np.int64).ravel())[codes]
+    from scipy.stats import norm
+
+    expect = f.size * (norm.cdf(e.edges[codes], mu, sd) - norm.cdf(e.edges[codes - 1], mu, sd))
+    z = (counts - expect) / np.sqrt(expect)
+    assert np.abs(z).max() < 5
+    ideal = f.size * (norm.cdf(codes + 0.5, mu, sd) - norm.cdf(codes - 0.5, mu, sd))
+    assert np.abs((counts - ideal) / np.sqrt(ideal)).max() > 5  # unequal widths are visible
+
+
 def test_undeclared_gain_drift_and_interleaved_adc():
     sp, _m, f = _one({"undeclared_gain_drift": {"drift_rel": 0.04}}, kind="flat", t=0.01, level=0.5, n=8)
     sig = f.mean((1, 2)) - sp.black_dn

@@ -62,6 +62,10 @@ EFFECT_CASES = {
     "rtn": [{"type": "rtn", "fraction": 0.1, "amplitude": 0.02, "amplitude_log_sigma": 0.3, "p_high": 0.3}],
     "charge_crosstalk": [{"type": "charge_crosstalk", "coefficient": 0.08, "diagonal": 0.02}],
     "adc_dnl": [{"type": "adc_dnl", "range_dn": 200.0, "offset_dn": 16.0, "bits": 8, "dnl_sigma": 0.3}],
+    # a coarse ADC (codes 4 DN apart) with unequal codes, then the quantiser of its grid (a no-op on its codes)
+    "adc_dnl_coarse": [{"type": "adc_dnl", "range_dn": 800.0, "offset_dn": 16.0, "bits": 8, "dnl_sigma": 0.3,
+                        "step_dn": 4.0},
+                       {"type": "quantization", "range_dn": 800.0, "step_dn": 4.0, "offset_dn": 16.0}],
     "empirical_code": [{"type": "empirical_code", "range_dn": 100.0, "offset_dn": 8.0, "first_code": 2,
                         "edges": [float(v) for v in [0.5 + k + 0.3 * ((k * 7919) % 11 - 5) / 5 for k in range(120)]]}],
     "dark_current": [{"type": "dark_current", "rate": 20.0, "dcnu_log_sigma": 0.4, "electron": 2.5e-3,

@@ -25,7 +25,7 @@ __all__ = ["CARDS", "DIAGNOSTIC_EFFECT", "EffectCard", "EffectParams", "Fit", "F
 
 #: name -> card, in signal-chain order (the order of the noise stage's composite entry): effects on
 #: the signal (before photon counting / the gain), then readout effects, the response, fixed offsets,
-#: and the quantisation last.
+#: and the ADC last (its unequal codes, then the quantiser of its grid).
 CARDS: dict[str, EffectCard] = {c.name: c for c in (
     prnu.PrnuCard(),
     channel_gain.ChannelGainCard(),
@@ -48,8 +48,8 @@ CARDS: dict[str, EffectCard] = {c.name: c for c in (
     hot_pixels.HotPixelsCard(),
     dead_pixels.DeadPixelsCard(),
     black_level_offset.BlackLevelOffsetCard(),
+    adc_dnl.AdcDnlCard(),  # before the quantiser: its codes are on the quantiser's grid (adc_dnl.py)
     quantization.QuantizationCard(),
-    adc_dnl.AdcDnlCard(),
 )}
 
 
@@ -87,7 +87,7 @@ def excluded_by(name: str, effects) -> str | None:
     Examples
     --------
     >>> excluded_by("adc_dnl", ["dsnu", "quantization"]), excluded_by("dsnu", ["quantization"])
-    ('quantization', None)
+    (None, None)
     """
     for other in effects:
         if other in CARDS[name].excludes or name in CARDS[other].excludes:

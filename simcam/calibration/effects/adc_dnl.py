@@ -17,11 +17,15 @@ its variance is ``(219/49) dnl_sigma^2`` (the sum of the squared coefficients). 
 leaves (the quadratic's bias on a bent histogram) is in the bootstrap of the current model (its mean,
 ``FitContext.sim_mean``), so ``dnl_sigma^2 = (value - sim_mean) 49 / 219``.
 
-It replaces the model's quantiser (codes one DN apart): it cannot sit beside ``quantization``
-(``excludes``).
+It is the model's ADC. Its codes are the model's (``LoopModel.q``: one DN, or the ``quantization``
+card's step): a coarse ADC has unequal codes as a fine one does, its transition levels off by fractions of
+its own code, and the histogram test reads it on the used codes' lattice (``code_histogram``). Beside
+``quantization`` both are kept: the step is the quantiser's, the unequal widths this card's (the noise
+stage applies ``adc_dnl`` first; its codes are on the quantiser's grid, which leaves them unchanged).
 
-Profile. ``{type: adc_dnl, range_dn, offset_dn, bits, dnl_sigma}``: the ADC on normalised raw (range
-``white - black``, the mean black level as the codes' offset, enough bits for the white level).
+Profile. ``{type: adc_dnl, range_dn, offset_dn, bits, dnl_sigma, step_dn}``: the ADC on normalised raw
+(range ``white - black``, the mean black level as the codes' offset, enough codes of ``step_dn`` DN for
+the white level).
 """
 
 from __future__ import annotations
@@ -42,7 +46,7 @@ class AdcDnl(EffectParams):
 
 
 class AdcDnlCard(EffectCard, name="adc_dnl", params=AdcDnl, diagnostics=("code_width_spread",),
-                 null_field="dnl_sigma", excludes=("quantization",)):
+                 null_field="dnl_sigma"):
 
     def fit(self, d, model, ctx):
         excess = float(ctx.value) - float(ctx.sim_mean)
@@ -51,10 +55,11 @@ class AdcDnlCard(EffectCard, name="adc_dnl", params=AdcDnl, diagnostics=("code_w
         return AdcDnl(dnl_sigma=float(min(math.sqrt(excess / WIDTH_VARIANCE_PER_SIGMA2), 2.0)))
 
     def to_profile(self, p, model):
-        bits = int(min(max(math.ceil(math.log2(float(model.white_dn) + 1.0)), 1), 20))
+        step = float(model.q)
+        bits = int(min(max(math.ceil(math.log2(float(model.white_dn) / step + 1.0)), 1), 20))
         return ProfileTerm(effect={"type": "adc_dnl", "range_dn": float(model.full_scale_dn),
                                    "offset_dn": float(np.mean(model.black_dn)), "bits": bits,
-                                   "dnl_sigma": float(p.dnl_sigma)})
+                                   "dnl_sigma": float(p.dnl_sigma), "step_dn": step})
 
     def from_profile(self, entry, full_scale_dn):
         return AdcDnl(dnl_sigma=float(entry["dnl_sigma"]))

@@ -9,7 +9,7 @@ dissertation, York University, 2020, ch. 2, quantisation noise). The step is the
 marginal variance and of the read-noise bookkeeping, not a term of its own.
 
 Fit. ``code_occupancy``: the median gap between the codes used in the central 98 % of the darks
-(else the dimmest flat), at least 1 DN. The read noise is then measured again through the quantiser:
+(else, or where the darks sit on one code, the dimmest flat), at least 1 DN. The read noise is then measured again through the quantiser:
 ``step^2 / 12`` is the quantisation variance only when the signal before the ADC is spread over many
 codes (Sheppard's correction; EMVA 1288 R4.0 sec. 2 states it for that case). Dark frames with a read
 noise below the step sit on one or two codes, and their temporal variance depends on where the dark
@@ -55,11 +55,10 @@ def dark_temporal_variance(darks) -> float:
 class QuantizationCard(DeclaredProfileCard, name="quantization", params=Quantization, diagnostics=("code_occupancy",)):
 
     def fit(self, d, model, ctx):
-        src = d.darks or sorted(d.flats, key=lambda a: float(a.mean()))[:1]
-        v = np.concatenate([s.ravel() for s in src])
-        lo, hi = np.percentile(v, [1, 99])
-        codes = np.unique(np.round(v[(v >= lo) & (v <= hi)]))
-        gaps = np.diff(codes)
+        from ..diagnostics import code_grid_codes
+
+        codes = code_grid_codes(d)
+        gaps = np.diff(codes) if codes is not None else np.zeros(0)
         p = Quantization(step_dn=max(float(np.median(gaps)) if gaps.size else 1.0, 1.0))
         if p.step_dn <= 1.0 or ctx.simulate is None or not ctx.dark_specs or not d.darks:
             return p

@@ -10,8 +10,11 @@ frequent (wide) or too rare (narrow) — "missing codes" in the extreme. The tra
 Reference: A. Abdelhamed, *Noise Modelling for Smartphone Cameras*, PhD dissertation, York
 University, 2020, ch. 2 (quantisation noise); IEEE Std 1241-2010, sec. 4.1.3 (DNL, INL).
 
-It replaces ``quantization`` (use one or the other): the output is the code, back in
-normalised raw.
+It is the capture's ADC: the output is the code, back in normalised raw. A coarse ADC (codes
+``step_dn`` DN apart: an ADC of fewer bits scaled to the range, or low bits dropped) has unequal codes
+too: its transition levels sit off by fractions of its own code, ``step_dn`` DN wide. Beside a
+``quantization`` of the same step, list ``adc_dnl`` first: its codes are on the quantiser's grid, which
+then leaves them as they are.
 """
 
 from __future__ import annotations
@@ -38,6 +41,9 @@ class AdcDnl(Effect):
         ADC resolution: codes 0 .. 2^bits - 1.
     dnl_sigma : float
         Standard deviation of the transition offsets, LSB (DNL std is sqrt(2) times it).
+    step_dn : float
+        Width of one code in DN (1: codes are DN; a coarse ADC's code is ``step_dn`` DN, its output
+        ``code * step_dn`` DN).
     """
 
     type: Literal["adc_dnl"] = "adc_dnl"
@@ -46,6 +52,7 @@ class AdcDnl(Effect):
     offset_dn: float = 0.0
     bits: int = Field(12, ge=1, le=20)
     dnl_sigma: float = Field(0.2, ge=0, le=2.0)
+    step_dn: float = Field(1.0, ge=1.0)
 
     def fixed(self, shape, rng):
         n = 2 ** int(self.bits)
@@ -53,10 +60,10 @@ class AdcDnl(Effect):
         return {"edges": np.sort(np.arange(n - 1) + 0.5 + u)}
 
     def codes(self, x: np.ndarray, edges: np.ndarray) -> np.ndarray:
-        """ADC codes of normalised raw ``x``."""
-        analog = x.astype(np.float64) * self.range_dn + self.offset_dn
+        """ADC codes of normalised raw ``x`` (in codes: ``code * step_dn`` is the DN)."""
+        analog = (x.astype(np.float64) * self.range_dn + self.offset_dn) / self.step_dn
         return np.searchsorted(edges, analog, side="right")
 
     def apply(self, x, ctx):
         code = self.codes(x, ctx.fixed["edges"])
-        return ((code - self.offset_dn) / self.range_dn).astype(np.float32)
+        return ((code * self.step_dn - self.offset_dn) / self.range_dn).astype(np.float32)
