@@ -48,7 +48,7 @@ if __package__ in (None, ""):  # run as a script: make the repository importable
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
     sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from machine import cpu_model  # noqa: E402
+from machine import compile_simcam, cpu_model  # noqa: E402
 from render import write_synthetic_dng  # noqa: E402  (benchmarks/render.py)
 
 from simcam.batch import Task  # noqa: E402
@@ -152,6 +152,7 @@ def main(argv=None) -> int:
     w, h = (int(v) for v in args.size.split("x"))
     work = Path(args.workdir or tempfile.mkdtemp(prefix="simcam-batch-bench-"))
     work.mkdir(parents=True, exist_ok=True)
+    compile_simcam()  # the dask runs are fresh processes, as a command is: with simcam's bytecode, as installed
     print(f"CPU: {cpu_model()} ({os.cpu_count()} logical cores); Python {platform.python_version()}; "
           f"load average {os.getloadavg()[0]:.2f} at start")
     print("Threads: every worker and Pool process 1 thread (SIMCAM_THREADS and OMP/NUMBA/MKL/OPENBLAS_NUM_THREADS=1); "

@@ -16,3 +16,17 @@ def cpu_model() -> str:
     except OSError:
         pass
     return platform.processor() or platform.machine() or "unknown"
+
+
+def compile_simcam() -> None:
+    """Compile simcam's bytecode, as a (non-editable) pip install does, before timing fresh processes.
+
+    With an editable install and ``PYTHONDONTWRITEBYTECODE`` set (as on the CI machines), every new
+    process would otherwise compile every simcam module it imports (~0.1 s for a render, more for a dask
+    worker's start), a cost that rawpy, tifffile and dask, installed compiled, never pay.
+    """
+    import compileall
+
+    import simcam
+
+    compileall.compile_dir(str(Path(simcam.__file__).parent), quiet=1)

@@ -53,7 +53,7 @@ if __package__ in (None, ""):  # run as a script: make the repository importable
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/machine.py, also when loaded by path
-from machine import cpu_model as _cpu_model  # noqa: E402
+from machine import compile_simcam, cpu_model as _cpu_model  # noqa: E402
 
 from simcam.frame import CameraMeta, RawFrame  # noqa: E402
 
@@ -284,14 +284,7 @@ def time_processes(dng: Path, tmp: Path, runs: int) -> dict[str, list[float]]:
     """Wall seconds of each command of :func:`process_commands`, ``runs`` interleaved rounds after a warm-up."""
     import subprocess
 
-    import compileall
-
-    import simcam
-
-    # simcam's bytecode compiled first, as a (non-editable) pip install does: with an editable install
-    # and PYTHONDONTWRITEBYTECODE set (as on the CI machines), every process would otherwise compile
-    # every simcam module it imports (~0.1 s), which rawpy and tifffile, installed compiled, never pay
-    compileall.compile_dir(str(Path(simcam.__file__).parent), quiet=1)
+    compile_simcam()  # as a pip install does (machine.compile_simcam)
     env = dict(os.environ)
     repo = str(Path(__file__).resolve().parent.parent)
     env["PYTHONPATH"] = repo + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")

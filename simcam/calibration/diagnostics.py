@@ -62,7 +62,7 @@ dark_ppcc_lambda        heavy_tail_read     Tukey-lambda shape maximising the PP
 code_occupancy          quantization        used / possible integer codes in the central 98 % of darks
                                             (of the dimmest flat where the darks sit on one code)
 code_width_spread       adc_dnl             relative spread of the ADC's code widths: histogram of the
-                                            codes of darks and the dimmest flat (those spread over >= 3
+                                            codes of darks and flats (those spread over >= 3
                                             codes), each code's count against a local quadratic
                                             through its 6 neighbours, Poisson part taken off
                                             (IEEE Std 1241-2010 histogram test of DNL)
@@ -1316,13 +1316,15 @@ CODE_MIN_SPREAD = 3.0
 
 
 def code_histogram(d: CaptureData) -> tuple[np.ndarray, float] | None:
-    """Counts of the ADC codes of the darks and the dimmest flat (the codes a sensor's histogram test uses)
+    """Counts of the ADC codes of the darks and the flats (the codes a sensor's histogram test uses)
     whose values spread over :data:`CODE_MIN_SPREAD` codes or more, on the ADC's lattice (the median gap
-    between used codes: a coarser ADC's step), and that step; None without darks or flats."""
+    between used codes: a coarser ADC's step), and that step; None without darks or flats. Every flat
+    counts: under a coarse ADC the darks may sit on one code and the dimmest flat on two, while a brighter
+    flat's shot noise spreads it over many."""
     key = "code_hist"
     if key in d.cache:
         return d.cache[key]
-    src = list(d.darks) + sorted(d.flats, key=lambda a: float(a.mean()))[:1]
+    src = list(d.darks) + sorted(d.flats, key=lambda a: float(a.mean()))
     if not src:
         return None
     lo = min(float(np.min(s)) for s in src)

@@ -44,6 +44,28 @@ def test_coarse_adc_uses_its_lattice():
     assert abs(dg.code_width_spread(d)) < 2e-3
 
 
+def test_a_brighter_flat_shows_the_codes_the_darks_and_dimmest_flat_cannot():
+    """A coarse ADC (8-DN codes) with DNL 0.25 of a code: darks on one code and a dim flat 1.5 codes wide say
+    nothing about the widths; a brighter flat 8 codes wide does (its shot noise spreads it), and the histogram
+    test reads it there: the statistic near its first-order closed form (219/49) sigma^2 = 0.28 instead of
+    n/a (~46 codes counted: relative SE ~ sqrt(2/46) = 0.21; seeds 6-11 gave 0.60-1.04 of it, the first-order
+    form a little high at sigma = 0.25)."""
+    rng = np.random.default_rng(6)
+    edges = np.sort(np.arange(511) + 0.5 + 0.25 * rng.standard_normal(511))
+
+    def adc(v):
+        return (np.searchsorted(edges, v / 8.0, side="right") * 8).astype(np.float32)
+
+    dark = np.full((8, 128, 128), 64.0, np.float32)
+    dim = adc(600.0 + 12.0 * rng.standard_normal((8, 128, 128)))
+    bright = adc(2000.0 + 64.0 * rng.standard_normal((8, 128, 128)))
+    only_dim = dg.CaptureData([dark], [dim], [], np.full((2, 2), 64.0), 4095.0, "RGGB")
+    assert dg.statistic("code_width_spread", only_dim)[0] is None
+    both = dg.CaptureData([dark], [dim, bright], [], np.full((2, 2), 64.0), 4095.0, "RGGB")
+    assert dg.code_histogram(both)[1] == 8.0
+    assert 0.5 < dg.code_width_spread(both) / (WIDTH_VARIANCE_PER_SIGMA2 * 0.25 ** 2) < 1.4
+
+
 def test_too_few_codes_is_not_applicable():
     d = _capture(np.round(100.0 + 0.3 * np.random.default_rng(5).standard_normal((4, 32, 32))).astype(np.float32))
     value, reason = dg.statistic("code_width_spread", d)
