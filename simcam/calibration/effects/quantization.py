@@ -8,17 +8,17 @@ dissertation, York University, 2020, ch. 2, quantisation noise). The step is the
 (``LoopModel.q``, 1 DN without this effect), so its variance is part of the base ADC term of the
 marginal variance and of the read-noise bookkeeping, not a term of its own.
 
-Fit. ``code_occupancy``: the median gap between the codes used in the central 98 % of the darks
-(else, or where the darks sit on one code, the dimmest flat), at least 1 DN. The read noise is then
-measured again through the quantiser: ``step^2 / 12`` is the quantisation variance only when the signal
-before the ADC is spread over many codes (Sheppard's correction; EMVA 1288 R4.0 sec. 2 states it for that
-case). Dark frames with a read noise below the step sit on one or two codes, and their temporal
-variance depends on where the dark level falls between two codes (a 0.9-DN read noise under a 10-DN step, the dark level 1 DN above a
-decision threshold: 11.5 DN^2, where the additive bookkeeping gives 0.81 + 8.33 = 9.1 DN^2 and, read
-backwards from 11.5 DN^2, a read noise of about 1.7 DN instead of 0.9). So the read noise is the one whose simulated
-darks (the loop's bootstrap: the current model with the quantiser, every other effect in it) have the
-measured mean temporal dark variance: indirect inference on a grid of read noises (Gourieroux,
-Monfort & Renault 1993), interpolated.
+Fit. ``code_occupancy``: the median gap between the codes used in the central 98 % of the darks (else,
+or where the darks sit on one code, the dimmest flat), at least 1 DN. The read noise is then measured
+again through the quantiser: ``step^2 / 12`` is the quantisation variance only when the signal before
+the ADC is spread over many codes (Sheppard's correction; EMVA 1288 R4.0 sec. 2 states it for that
+case). Dark frames with a read noise below the step sit on one or two codes, and their temporal variance
+depends on where the dark level falls between two codes (a 0.9-DN read noise under a 10-DN step, the
+dark level 1 DN above a decision threshold: 11.5 DN^2, where the additive bookkeeping gives 0.81 + 8.33
+= 9.1 DN^2 and, read backwards from 11.5 DN^2, a read noise of about 1.7 DN instead of 0.9). So the read
+noise is the one whose simulated darks (the loop's bootstrap: the current model with the quantiser,
+every other effect in it) have the measured mean temporal dark variance: indirect inference on a grid of
+read noises (Gourieroux, Monfort & Renault 1993), interpolated.
 
 Profile. ``{type: quantization, range_dn, step_dn, offset_dn}``: the ADC on normalised raw, range
 ``white - black``, the step, and the mean black level as the codes' offset.
