@@ -251,13 +251,16 @@ def sequence_kind(name: str) -> str:
 
 
 def read_capture_set(path: str | Path, *, check_saturation: bool = True, region=None,
-                     progress: bool | None = None) -> CaptureSet:
+                     progress: bool | None = None, threads: int = 1) -> CaptureSet:
     """Read a capture-set directory or an EMVA 1288 descriptor file, one frame at a time.
 
     Every frame goes through the sequence's whole-frame accumulators (:class:`FrameSummary`);
     with a ``region`` (:class:`simcam.calibration.region.Region`) only its pixels are kept in
     memory (``Sequence.frames``), else whole frames. ``progress``: a progress bar over the frames
-    (None: when the output is a terminal).
+    (None: when the output is a terminal). ``threads``: sequence directories read at once (each
+    sequence's frames stay in order, the accumulators release the GIL; the sequences come back in
+    directory order and the first failing one, in that order, is the error raised: the same result
+    for any count).
 
     Raises
     ------
@@ -277,9 +280,22 @@ def read_capture_set(path: str | Path, *, check_saturation: bool = True, region=
     dirs = sorted(p for p in path.iterdir() if p.is_dir())
     total = sum(len(_frame_files(d)) for d in dirs if not _is_sidd(d))
     with _progress(total, "reading frames", progress) as bar:
-        for d in dirs:
-            seqs.append(_read_sequence_dir(d, region, bar))
-            keep_spatial_maps(seqs)
+        if threads > 1 and len(dirs) > 1:
+            from concurrent.futures import ThreadPoolExecutor
+
+            with ThreadPoolExecutor(max_workers=min(threads, len(dirs))) as pool:
+                futures = [pool.submit(_read_sequence_dir, d, region, bar) for d in dirs]
+                try:
+                    for fut in futures:  # in directory order; the maps not kept are dropped as each arrives
+                        seqs.append(fut.result())
+                        keep_spatial_maps(seqs)
+                finally:
+                    for fut in futures:
+                        fut.cancel()
+        else:
+            for d in dirs:
+                seqs.append(_read_sequence_dir(d, region, bar))
+                keep_spatial_maps(seqs)
     if not seqs:
         raise DatasetError(f"{path}: no sequence sub-directories; expected dark*/, flat*/ or scene directories of frames")
     cs = CaptureSet(str(path), "directory", seqs)

@@ -91,7 +91,7 @@ from scipy import fft as sfft
 from scipy import stats as sst
 from scipy.special import ndtri_exp
 
-from .pixelwise import RTN_GAP_SIGMA, RTN_LEVEL_VAR, temporal_median, two_level_splits
+from .pixelwise import RTN_GAP_SIGMA, RTN_LEVEL_VAR, median_box, temporal_median, two_level_splits
 
 PLANE_OFFSETS = ((0, 0), (0, 1), (1, 0), (1, 1))
 
@@ -236,6 +236,15 @@ class CaptureData:
                 vt = float(np.mean([np.mean(np.var(d.astype(np.float64), axis=0, ddof=1)) for d in self.darks]))
                 self.cache["dmap"] = (m, vt, allf.shape[0])
         return self.cache["dmap"]
+
+    def dark_profile_free_map(self) -> np.ndarray | None:
+        """:func:`remove_profiles` of the dark mean map (cached): what the DSNU and hot-pixel statistics read."""
+        if "dmap_pf" not in self.cache:
+            dm = self.dark_map()
+            self.cache["dmap_pf"] = None if dm is None else remove_profiles(dm[0])
+            if dm is not None:
+                self.cache["dmap_pf"].flags.writeable = False  # shared by its readers
+        return self.cache["dmap_pf"]
 
     def flat_map(self) -> tuple[np.ndarray, float, int] | None:
         """Mean map of the flat with the most frames (the brightest among equals), its temporal
@@ -774,8 +783,8 @@ def dsnu_excess(d: CaptureData):
     dm = d.dark_map()
     if dm is None:
         return None
-    m, _, n = dm
-    return _ratio(clipped_variance(remove_profiles(m)), d.profile_free_dark_variance() / n,
+    n = dm[2]
+    return _ratio(clipped_variance(d.dark_profile_free_map()), d.profile_free_dark_variance() / n,
                   "the dark temporal variance without row and column profiles")
 
 
@@ -793,7 +802,7 @@ def hot_pixel_mask(d: CaptureData) -> np.ndarray | None:
         if dm is None:
             d.cache["hotmask"] = None
         else:
-            r_mean = remove_profiles(dm[0])
+            r_mean = d.dark_profile_free_map()
             thr = 6 * robust_sigma(r_mean)
             r_med = remove_profiles(temporal_median(np.concatenate(d.darks)))
             d.cache["hotmask"] = (r_mean > thr) & (r_med > thr) & ~_telegraph_mask(d) & ~constant_pixels(d)
@@ -1008,37 +1017,33 @@ def hot_pixel_tail(d: CaptureData):
     return None if mask is None else float(np.mean(mask))
 
 
+def _within(x: np.ndarray, k: float) -> np.ndarray:
+    """Mask of the values of ``x`` less than ``k`` robust sigmas (:func:`robust_sigma`) from its median."""
+    dev = np.abs(x - np.median(x))
+    return dev < k * 1.4826 * float(np.median(dev))
+
+
 def _fixed_planes(frames: np.ndarray):
     """Per CFA plane, the even-frame and odd-frame mean maps (profiles removed) and the mask of pixels
-    within 6 robust sigma in both: ``(pa, pb, ok)``, the inputs of :func:`_fixed_cov`."""
+    within 6 robust sigma in both: ``(pa, pb, ok)``, the inputs of :func:`_fixed_cov_blocks`."""
     a = remove_profiles(frames[0::2].astype(np.float64).mean(0))
     b = remove_profiles(frames[1::2].astype(np.float64).mean(0))
     for dy, dx in PLANE_OFFSETS:
         pa, pb = a[dy::2, dx::2], b[dy::2, dx::2]
-        ok = (np.abs(pa - np.median(pa)) < 6 * robust_sigma(pa)) & (np.abs(pb - np.median(pb)) < 6 * robust_sigma(pb))
+        ok = _within(pa, 6.0) & _within(pb, 6.0)
         if ok.sum() < 2:
             raise NotApplicable("fewer than 2 pixels of a CFA plane inside 6 robust sigma of the even/odd-frame "
                                 "mean maps (constant or quantisation-dominated maps)")
         yield pa, pb, ok
 
 
-def _fixed_cov(frames: np.ndarray) -> list[float] | None:
-    """Per CFA plane, the covariance of the even-frame and odd-frame mean maps (profiles removed,
-    pixels beyond 6 robust sigma in either map left out): the variance of the fixed pattern alone,
-    temporal noise being independent between the halves. Median-profile removal takes ~3 % of an
-    i.i.d. pattern's variance with it (64 x 64 frames)."""
-    if frames.shape[0] < 2:
-        return None
-    out = []
-    for pa, pb, ok in _fixed_planes(frames):
-        pa, pb = pa[ok], pb[ok]
-        out.append(float(np.mean((pa - pa.mean()) * (pb - pb.mean()))))
-    return out
-
-
 def _fixed_cov_blocks(frames: np.ndarray, blocks: int) -> list[tuple[np.ndarray, np.ndarray]]:
-    """:func:`_fixed_cov`'s even/odd-frame products per CFA plane, summed over ``blocks`` bands of rows:
-    (sums, pixel counts) per plane, for a jackknife over the bands."""
+    """Per CFA plane, the covariance of the even-frame and odd-frame mean maps (profiles removed,
+    pixels beyond 6 robust sigma in either map left out) -- the variance of the fixed pattern alone,
+    temporal noise being independent between the halves -- as its centred products summed over
+    ``blocks`` bands of rows: (sums, pixel counts) per plane; the covariance is ``sums.sum() /
+    counts.sum()``, and the bands serve a jackknife. Median-profile removal takes ~3 % of an i.i.d.
+    pattern's variance with it (64 x 64 frames)."""
     out = []
     for pa, pb, ok in _fixed_planes(frames):
         prod = np.where(ok, (pa - pa[ok].mean()) * (pb - pb[ok].mean()), 0.0)
@@ -1047,19 +1052,47 @@ def _fixed_cov_blocks(frames: np.ndarray, blocks: int) -> list[tuple[np.ndarray,
     return out
 
 
-def prnu_by_level(d: CaptureData, blocks: int = 16) -> list[tuple[float, float, float]]:
+#: bands of rows of :func:`fixed_cov_blocks` (the jackknife of :func:`prnu_by_level`)
+FIXED_COV_BLOCKS = 16
+
+
+def fixed_cov_blocks(d: CaptureData, which) -> list[tuple[np.ndarray, np.ndarray]] | None:
+    """:func:`_fixed_cov_blocks` (:data:`FIXED_COV_BLOCKS` bands) of the darks pooled (``which="darks"``)
+    or of flat ``which`` (its index in ``d.flats``), computed once per capture (the PRNU statistics
+    share it); None with fewer than 2 frames. A :class:`NotApplicable` is raised again on each call."""
+    key = ("fixed_cov", which)
+    if key not in d.cache:
+        frames = np.concatenate(d.darks) if which == "darks" else d.flats[which]
+        try:
+            d.cache[key] = _fixed_cov_blocks(frames, FIXED_COV_BLOCKS) if frames.shape[0] >= 2 else None
+        except NotApplicable as exc:
+            d.cache[key] = exc
+    if isinstance(d.cache[key], NotApplicable):
+        raise d.cache[key]
+    return d.cache[key]
+
+
+def _cov_of_blocks(blocks: list[tuple[np.ndarray, np.ndarray]]) -> list[float]:
+    """The per-plane covariances of :func:`fixed_cov_blocks`' band sums."""
+    return [float(s.sum() / max(c.sum(), 1.0)) for s, c in blocks]
+
+
+def prnu_by_level(d: CaptureData) -> list[tuple[float, float, float]]:
     """Per flat sequence of >= 2 frames, (signal above the darks, relative fixed-pattern variance, its
     standard error): :func:`prnu_excess`'s estimate made on each flat, the standard error by a
-    jackknife over ``blocks`` bands of rows (the pattern is independent between bands). A gain
+    jackknife over :data:`FIXED_COV_BLOCKS` bands of rows (the pattern is independent between bands). A gain
     (PRNU) gives the same relative variance at every signal level (EMVA 1288 Release 4.0, sec. 8.2:
     the PRNU is the spatial variance of the light's part over the signal squared, one number for the
     sensor). Sorted by signal."""
     if not d.flats:
         return []
+    if "prnu_levels" in d.cache:
+        return d.cache["prnu_levels"]
+    blocks = FIXED_COV_BLOCKS
     dm = d.dark_map()
-    cd = _fixed_cov_blocks(np.concatenate(d.darks), blocks) if dm is not None else None
+    cd = fixed_cov_blocks(d, "darks") if dm is not None else None
     out = []
-    for f in d.flats:
+    for fi, f in enumerate(d.flats):
         if f.shape[0] < 2:
             continue
         m = f.astype(np.float64).mean(0)
@@ -1073,7 +1106,7 @@ def prnu_by_level(d: CaptureData, blocks: int = 16) -> list[tuple[float, float, 
             levels.append(lv)
         if min(levels) <= 0:
             continue
-        cf = _fixed_cov_blocks(f, blocks)
+        cf = fixed_cov_blocks(d, fi)
 
         def rel(keep):
             v = []
@@ -1087,7 +1120,8 @@ def prnu_by_level(d: CaptureData, blocks: int = 16) -> list[tuple[float, float, 
         jk = np.array([rel(np.arange(blocks) != i) for i in range(blocks)])
         se = float(np.sqrt((blocks - 1) / blocks * np.sum((jk - jk.mean()) ** 2)))
         out.append((float(np.mean(levels)), full, se))
-    return sorted(out)
+    d.cache["prnu_levels"] = sorted(out)
+    return d.cache["prnu_levels"]
 
 
 def flat_level_pair(rows: list[tuple[float, float, float]]):
@@ -1116,19 +1150,20 @@ def flat_spread_growth(d: CaptureData):
 def prnu_excess(d: CaptureData):
     """Relative PRNU variance: per CFA plane, (fixed-pattern variance of the flat - that of the darks)
     / signal^2, averaged over the planes. Fixed-pattern variances are even/odd-frame covariances
-    (:func:`_fixed_cov`): no temporal variance is subtracted (which, with a robust sigma of the planes
+    (:func:`fixed_cov_blocks`): no temporal variance is subtracted (which, with a robust sigma of the planes
     pooled, a scale mixture, left the estimate ~15 % low in sigma), and offsets common to dark and flat
     (DSNU, column FPN) cancel; hot pixels are left out."""
     fm = d.flat_map()
     if fm is None:
         return None
     m = fm[0]
-    f = max(d.flats, key=lambda a: (a.shape[0], float(a.mean())))  # the flat of flat_map
-    cf = _fixed_cov(f)
+    i = max(range(len(d.flats)), key=lambda j: (d.flats[j].shape[0], float(d.flats[j].mean())))  # flat_map's
+    cf = fixed_cov_blocks(d, i)
     if cf is None:
         return None
+    cf = _cov_of_blocks(cf)
     dm = d.dark_map()
-    cd = _fixed_cov(np.concatenate(d.darks)) if dm is not None else None
+    cd = _cov_of_blocks(fixed_cov_blocks(d, "darks")) if dm is not None and fixed_cov_blocks(d, "darks") else None
     out = []
     for k, (dy, dx) in enumerate(PLANE_OFFSETS):
         level = float(np.mean(m[dy::2, dx::2]))
@@ -1494,7 +1529,7 @@ def dark_slope_map(d: CaptureData) -> np.ndarray | None:
         out = sum(ci * m for ci, m in zip(c, maps))
         for dy, dx in PLANE_OFFSETS:
             p = out[dy::2, dx::2]
-            med = median_filter(p, size=5, mode="nearest")
+            med = median_box(p, 5)
             r = p - med
             s = robust_sigma(r)
             bad = np.abs(r) > 6 * s if s > 0 else np.zeros(p.shape, bool)
@@ -1523,19 +1558,21 @@ def glow_template(shape: tuple[int, int], origin: str, scale: float) -> tuple[np
     return f, tc
 
 
-def _glow_templates(shape: tuple[int, int]) -> list:
-    """Per (origin, scale) of the grid: the plane-centred template, its squared norm, and the squared
-    norms of its row sums and of its column sums (what a row or a column offset projects onto it)."""
+def _glow_templates(shape: tuple[int, int]) -> tuple[list, np.ndarray, np.ndarray]:
+    """The grid of (origin, scale) pairs; their plane-centred templates stacked as rows of one
+    (templates, pixels) matrix; and per template the squared norms of the template, of its row sums and
+    of its column sums (what a row or a column offset projects onto it), as (templates, 3)."""
     if shape not in _GLOW_TEMPLATES:
         if len(_GLOW_TEMPLATES) > 8:
             _GLOW_TEMPLATES.clear()
-        out = []
-        for o in GLOW_ORIGINS:
-            for s in GLOW_SCALES:
-                tc = glow_template(shape, o, s)[1]
-                out.append((o, s, tc, float(np.sum(tc * tc)), float(np.sum(tc.sum(1) ** 2)),
-                            float(np.sum(tc.sum(0) ** 2))))
-        _GLOW_TEMPLATES[shape] = out
+        grid = [(o, s) for o in GLOW_ORIGINS for s in GLOW_SCALES]
+        stack = np.empty((len(grid), shape[0] * shape[1]))
+        norms = np.empty((len(grid), 3))
+        for i, (o, s) in enumerate(grid):
+            tc = glow_template(shape, o, s)[1]
+            stack[i] = tc.ravel()
+            norms[i] = float(np.sum(tc * tc)), float(np.sum(tc.sum(1) ** 2)), float(np.sum(tc.sum(0) ** 2))
+        _GLOW_TEMPLATES[shape] = (grid, stack, norms)
     return _GLOW_TEMPLATES[shape]
 
 
@@ -1571,14 +1608,12 @@ def glow_fits(m: np.ndarray) -> list[tuple[str, float, float, float]]:
     variance is that of white pixel, row and column noise projected on the template
     (:func:`slope_noise`)."""
     pix, row, col = slope_noise(m)
-    out = []
-    for o, s, tc, n2, rr, cc in _glow_templates(m.shape):
-        proj = float(np.sum(tc * m))
-        var = pix * n2 + row * rr + col * cc
-        if not var > 0:
-            raise NotApplicable("the dark slope map has no noise (constant darks)")
-        out.append((o, s, proj / n2, proj / np.sqrt(var)))
-    return out
+    grid, stack, norms = _glow_templates(m.shape)
+    proj = stack @ np.ascontiguousarray(m, dtype=np.float64).ravel()  # every template's projection at once
+    var = norms @ np.array([pix, row, col])
+    if not np.all(var > 0):
+        raise NotApplicable("the dark slope map has no noise (constant darks)")
+    return [(o, s, float(p / n2), float(p / np.sqrt(v))) for (o, s), p, n2, v in zip(grid, proj, norms[:, 0], var)]
 
 
 def glow_field(d: CaptureData):

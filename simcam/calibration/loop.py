@@ -302,7 +302,9 @@ REFUTE_PASS_P = 0.1
 THREADS_ENV = "SIMCAM_LOOP_THREADS"
 
 
-def _threads(cfg: LoopConfig) -> int:
+def loop_threads(cfg: LoopConfig) -> int:
+    """Threads of the loop's replicates (and of reading the capture set): ``cfg.threads``, else
+    :data:`THREADS_ENV`, else the cores this process may run on."""
     if cfg.threads is not None:
         return max(1, int(cfg.threads))
     env = os.environ.get(THREADS_ENV, "").strip()
@@ -427,7 +429,7 @@ class Loop:
         self._floors: dict[str, float] = {}
         self._nulls: dict[str, float | None] = {}  # diagnostic -> closed-form count (held_null)
         self._data_sides: dict[bytes, tuple] = {}  # digest of the held-out clean levels -> HeldOut's data side
-        self.threads = _threads(cfg)
+        self.threads = loop_threads(cfg)
 
     def data_side(self, model: LoopModel, specs) -> tuple:
         """The held-out data's side of :class:`HeldOut` under ``model`` (value count, thinned values, pooled

@@ -21,7 +21,7 @@ from . import diagnostics as dg
 from .effects import DIAGNOSTIC_EFFECT, card_for
 from .effects.card import format_number as _num
 from .heldout import FAMILIES, GATE_Z, KL_BINNING, KL_EDGES, STRUCTURED_BINNING
-from .loop import GroupResult, LoopConfig
+from .loop import GroupResult, LoopConfig, loop_threads
 from .model import LoopModel
 from .simulate import simulate_capture
 
@@ -746,7 +746,7 @@ def run_and_write(capture_dir: str | Path, out_dir: str | Path, *, start_profile
     if start_profile and Path(start_profile).resolve() == (out_dir / "profile.yaml").resolve():
         raise DatasetError(f"--start-profile {start_profile}: would be overwritten by the output profile; "
                            "expected a file outside OUT_DIR")
-    capture = read_capture_set(capture_dir, region=cfg.region(), progress=cfg.progress)
+    capture = read_capture_set(capture_dir, region=cfg.region(), progress=cfg.progress, threads=loop_threads(cfg))
     results = run_loop(capture, cfg, starts)
     emva = {iso: emva1288_numbers(capture.group(iso)) for iso in capture.isos()}
     dark = {}

@@ -26,6 +26,27 @@ def test_reads_directory(small_set):
     assert cs.group(800)[-1].clean is not None
 
 
+def test_two_threads_read_the_same_sequences_in_the_same_order(small_set):
+    from simcam.calibration.region import Region
+
+    a = read_capture_set(small_set, region=Region(max_size=8), threads=1)
+    b = read_capture_set(small_set, region=Region(max_size=8), threads=2)
+    assert [s.name for s in a.sequences] == [s.name for s in b.sequences] == ["dark", "flat_0", "flat_1", "scene"]
+    for x, y in zip(a.sequences, b.sequences):
+        assert np.array_equal(x.frames, y.frames)
+        assert x.frames.shape == (4, 8, 8)
+        for f in ("pair_mean", "pair_var", "avg_mean", "avg_var", "temporal_var", "frame_means"):
+            assert np.array_equal(getattr(x.summary, f), getattr(y.summary, f)), f
+
+
+def test_two_threads_raise_the_first_failing_sequence_in_directory_order(small_set):
+    for name in ("flat_0", "scene"):  # two broken sequences: flat_0 comes first, whichever thread ends first
+        for p in sorted((small_set / name).glob("frame_*.npy"))[1:]:
+            p.unlink()
+    with pytest.raises(DatasetError, match="flat_0: sequence has 1 frame"):
+        read_capture_set(small_set, threads=2)
+
+
 def test_mixed_size_rejected(small_set):
     np.save(small_set / "dark" / "frame_009.npy", np.zeros((16, 18), np.uint16))
     with pytest.raises(DatasetError, match=r"frame_009.npy: frame size 18x16 differs"):

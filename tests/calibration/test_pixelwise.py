@@ -3,7 +3,10 @@
 import numpy as np
 import pytest
 
-from simcam.calibration.pixelwise import temporal_median, two_level_split, two_level_splits
+from scipy.ndimage import median_filter
+
+from simcam.calibration.pixelwise import (batcher_network, median_box, selection_network, temporal_median,
+                                          two_level_split, two_level_splits)
 
 
 @pytest.mark.parametrize("n", [2, 3, 8, 15, 16])
@@ -56,3 +59,46 @@ def test_several_rules_at_once_match_each_rule_alone():
     for got, want in ((strict, _two_level_numpy(v, 1.0)), (loose, _two_level_numpy(v, 1.0, 1, 4.0, 3.0))):
         assert np.array_equal(got[0], want[0]) and np.allclose(got[1], want[1]) and np.array_equal(got[2], want[2])
     assert loose[0].sum() > strict[0].sum()  # the single-frame pixels only count for the loose rule
+
+
+@pytest.mark.parametrize("n", [2, 4, 8, 16, 32])
+def test_batcher_network_sorts_every_zero_one_input(n):
+    """The 0-1 principle (Knuth, TAOCP vol. 3, sec. 5.3.4, ex. 36): a comparator network sorts every input iff
+    it sorts every sequence of 0s and 1s; all 2^n of them for n <= 16, 20 000 random ones for 32."""
+    net = batcher_network(n)
+    rng = np.random.default_rng(n)
+    rows = (np.arange(2 ** n)[:, None] >> np.arange(n)) & 1 if n <= 16 else rng.integers(0, 2, (20000, n))
+    v = rows.copy()
+    for a, b in net:
+        lo, hi = np.minimum(v[:, a], v[:, b]), np.maximum(v[:, a], v[:, b])
+        v[:, a], v[:, b] = lo, hi
+    assert np.array_equal(v, np.sort(rows, axis=1))
+
+
+@pytest.mark.parametrize("m", [9, 25, 49])
+def test_selection_network_places_the_median(m):
+    rng = np.random.default_rng(m)
+    x = np.round(rng.normal(0, 2, (5000, m)))  # ties
+    v = x.copy()
+    for a, b in selection_network(m, m // 2):
+        lo, hi = np.minimum(v[:, a], v[:, b]), np.maximum(v[:, a], v[:, b])
+        v[:, a], v[:, b] = lo, hi
+    assert np.array_equal(v[:, m // 2], np.median(x, axis=1))
+
+
+@pytest.mark.parametrize("shape", [(64, 80), (7, 9), (1, 5), (6, 1), (2, 2), (1, 1)])
+@pytest.mark.parametrize("size", [3, 5, 7])
+def test_median_box_is_scipy_median_filter(shape, size):
+    rng = np.random.default_rng(size * 100 + shape[0])
+    x = rng.normal(0, 1, shape)
+    x[rng.random(shape) < 0.3] = 0.5  # ties
+    x.flat[0] = 40.0  # an outlier
+    ref = median_filter(x, size=size, mode="nearest")
+    assert np.array_equal(median_box(x, size), ref)
+    assert np.array_equal(median_box(x.astype(np.float32), size), median_filter(x.astype(np.float32), size=size,
+                                                                                   mode="nearest").astype(np.float64))
+
+
+def test_median_box_refuses_an_even_window():
+    with pytest.raises(ValueError, match="odd"):
+        median_box(np.zeros((4, 4)), 4)

@@ -42,11 +42,11 @@ class DsnuCard(OffsetSigmaCard, name="dsnu", params=Dsnu, diagnostics=("dsnu_exc
                marginal_rank=60):
 
     def fit(self, d, model, ctx):
-        m, _, n = d.dark_map()
+        n = d.dark_map()[2]
         if ctx.diagnostic == "dsnu_excess" and np.isfinite(ctx.value) and np.isfinite(ctx.sim_mean):
             # the excess over the current model's bootstrap (module docstring): the robust spread's bias on
             # coarse codes, the temporal noise and the model's own fixed patterns are in the simulated mean
             s2 = (float(ctx.value) - float(ctx.sim_mean)) * d.profile_free_dark_variance() / n
         else:
-            s2 = dg.clipped_variance(dg.remove_profiles(m)) - d.profile_free_dark_variance() / n
+            s2 = dg.clipped_variance(d.dark_profile_free_map()) - d.profile_free_dark_variance() / n
         return Dsnu(sigma_dn=float(np.sqrt(max(s2, 0.0))))

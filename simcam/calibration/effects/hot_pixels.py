@@ -87,8 +87,7 @@ class HotPixelsCard(EffectCard, name="hot_pixels", params=HotPixels, null_field=
             clipped = dg.clipped_constant_pixels(d)
             if not clipped.any():  # nothing at white: the same fit as the other form
                 return HotPixels(fraction=0.0, log_mean=0.0, log_sigma=0.05, count=0)
-        m, _vt, _n = d.dark_map()
-        r = dg.remove_profiles(m)
+        r = d.dark_profile_free_map()
         hot = dg.hot_pixel_mask(d)  # persistent outliers (temporal median), offsets from the mean map
         if not hot.any():  # fewer persistent outliers than the model's (none here): nothing to add
             return HotPixels(fraction=0.0, log_mean=0.0, log_sigma=0.05, count=0)
