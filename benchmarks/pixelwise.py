@@ -1,6 +1,7 @@
 """The residual battery's per-pixel kernels (:mod:`simcam.calibration.pixelwise`) against the numpy forms
 they replace: median over frames and the two-level (telegraph) split, on 16 frames x 384 x 512 integer
-codes, and the 5 x 5 running median of one CFA plane against scipy's ``median_filter``. Prints the CPU model and the median of 7 runs of each.
+codes, and the 5 x 5 running median of one CFA plane against scipy's ``median_filter``. Prints the CPU
+model and the median of 7 runs of each.
 
 Usage::
 
