@@ -29,15 +29,24 @@ import typer
 
 CONTEXT_SETTINGS = {"help_option_names": ["-h", "--help"]}
 
-app = typer.Typer(
-    name="simcam",
-    help="Camera-pipeline simulator and raw noise-synthesis toolkit.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
-    context_settings=CONTEXT_SETTINGS,
-    rich_markup_mode=None,  # help texts are plain: "SeedSequence([seed, 0, i])" is not rich markup
-)
+#: command (or command group) -> the module of ``simcam.commands`` that registers it: a run of one command
+#: imports that module alone (tests/test_cli.py checks the table against what the modules register)
+COMMANDS = {"bench": "bench", "flow": "flow", "gt": "gt", "info": "info", "loop": "loop", "profile": "profile",
+            "render": "render", "synth": "synth", "validate": "render"}
+
+
+def _new_app() -> typer.Typer:
+    a = typer.Typer(
+        name="simcam",
+        help="Camera-pipeline simulator and raw noise-synthesis toolkit.",
+        no_args_is_help=True,
+        add_completion=False,
+        pretty_exceptions_enable=False,
+        context_settings=CONTEXT_SETTINGS,
+        rich_markup_mode=None,  # help texts are plain: "SeedSequence([seed, 0, i])" is not rich markup
+    )
+    a.callback()(_root)
+    return a
 
 
 def _version() -> str:
@@ -55,7 +64,6 @@ def _show_version(value: bool) -> None:
         raise typer.Exit(0)
 
 
-@app.callback()
 def _root(
     version: bool = typer.Option(False, "--version", is_eager=True, callback=_show_version,
                                  help="Print the version and exit."),
@@ -64,12 +72,22 @@ def _root(
     """Camera-pipeline simulator and raw noise-synthesis toolkit."""
 
 
-def _register_commands() -> None:
+def _register_commands(target: typer.Typer, modules=None) -> None:
+    """Register the commands of ``modules`` (names in ``simcam.commands``; all of them when None) on ``target``."""
     from . import commands
 
-    for mod in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
-        if not mod.name.startswith("_"):
-            importlib.import_module(f"{commands.__name__}.{mod.name}").register(app)
+    names = sorted(m.name for m in pkgutil.iter_modules(commands.__path__) if not m.name.startswith("_")) \
+        if modules is None else sorted(set(modules))
+    for name in names:
+        importlib.import_module(f"{commands.__name__}.{name}").register(target)
+
+
+def build_app(modules=None) -> typer.Typer:
+    """The command-line app with the commands of ``modules`` (all when None)."""
+    a = _new_app()
+    _register_commands(a, modules)
+    _plain_metavars(a)
+    return a
 
 
 def _metavar(annotation) -> str:
@@ -108,9 +126,25 @@ def _plain_argument_help() -> None:
         argument.display_type_rich = lambda self, ctx: None
 
 
-_register_commands()
-_plain_metavars(app)
 _plain_argument_help()
+
+
+def __getattr__(name: str):
+    """``simcam.cli.app``: the app with every command, built on first use (a run of one command builds
+    an app with that command alone, :func:`main`)."""
+    if name == "app":
+        globals()["app"] = build_app()
+        return globals()["app"]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def _app_for(argv: list[str]) -> typer.Typer:
+    """The app a run needs: the command module of the first word of ``argv`` when it names one of
+    :data:`COMMANDS`, else every command (help, typos: the usage lists them all)."""
+    if "app" in globals():  # built already (and perhaps extended by the caller): the one app
+        return globals()["app"]
+    word = next((a for a in argv if not a.startswith("-")), None)
+    return build_app([COMMANDS[word]]) if word in COMMANDS else __getattr__("app")
 
 
 def _click_exceptions() -> ModuleType:
@@ -125,10 +159,10 @@ def _classes(module: ModuleType, name: str, *extra: type) -> tuple[type, ...]:
     return tuple(c for c in (found, *extra) if isinstance(c, type))
 
 
-def _command_name(argv: list[str]) -> str:
-    """``simcam render`` / ``simcam profile import-darktable``: the words before the first option or argument."""
+def _command_name(argv: list[str], group) -> str:
+    """``simcam render`` / ``simcam profile import-darktable``: the words before the first option or argument
+    (``group``: the app's click command)."""
     words = ["simcam"]
-    group = typer.main.get_command(app)
     for arg in argv:
         if arg.startswith("-"):
             continue
@@ -170,7 +204,8 @@ def main(argv: list[str] | None = None) -> int:
 
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv or os.environ.get("SIMCAM_DEBUG", "") not in ("", "0")
-    name = _command_name(argv)
+    command = typer.main.get_command(_app_for(argv))
+    name = _command_name(argv, command)
     if not argv:  # the help, as a usage error (click < 8.2 would exit 0 here, >= 8.2 exits 2)
         argv = ["--help"]
         usage_only = True
@@ -185,16 +220,16 @@ def main(argv: list[str] | None = None) -> int:
     with warnings.catch_warnings():
         warnings.showwarning = show
         warnings.simplefilter("default")
-        return _dispatch(argv, name=name, debug=debug, usage_only=usage_only)
+        return _dispatch(command, argv, name=name, debug=debug, usage_only=usage_only)
 
 
-def _dispatch(argv: list[str], *, name: str, debug: bool, usage_only: bool) -> int:
-    """Run the app once; map every outcome to (one line on stderr and) an exit status."""
+def _dispatch(command, argv: list[str], *, name: str, debug: bool, usage_only: bool) -> int:
+    """Run the app's click ``command`` once; map every outcome to (one line on stderr and) an exit status."""
     from .errors import SimcamError
 
     ce = _click_exceptions()
     try:
-        rv = app(args=argv, prog_name="simcam", standalone_mode=False)
+        rv = command.main(args=argv, prog_name="simcam", standalone_mode=False)
     except SimcamError as exc:
         print(f"{name}: error: {exc}", file=sys.stderr)
         return 2

@@ -33,6 +33,25 @@ def test_help_does_not_import_heavy_modules():
     assert r.returncode == 0 and r.stdout.strip() == "", r.stdout + r.stderr
 
 
+def test_command_table_names_what_each_module_registers():
+    """``simcam.cli.COMMANDS`` (which module a run of one command imports) against the modules themselves."""
+    from simcam import cli
+
+    names = {m: {c.name for c in cli.build_app([m]).registered_commands}
+             | {g.name for g in cli.build_app([m]).registered_groups} for m in set(cli.COMMANDS.values())}
+    assert {cmd: mod for mod, cmds in names.items() for cmd in cmds} == cli.COMMANDS
+    everything = cli.build_app()
+    assert {c.name for c in everything.registered_commands} | {g.name for g in everything.registered_groups} == set(
+        cli.COMMANDS)
+
+
+def test_one_command_imports_its_module_alone():
+    code = ("import sys; from simcam.cli import main; main(['validate', '--help']); "
+            "print(sorted(m for m in sys.modules if m.startswith('simcam.commands.')), file=sys.stderr)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.returncode == 0 and r.stderr.strip() == "['simcam.commands.render']", r.stderr
+
+
 def test_validate_errors_are_one_line_with_exit_2(tmp_path, capsys):
     p = tmp_path / "bad.yaml"
     p.write_text("version: 1\nstages:\n  - type: normalise\n")

@@ -17,6 +17,15 @@ parameters measured per sensor), in ``maps.npz`` beside ``profile.yaml``:
   per-site median: PRNU as this sensor has it. It replaces ``prnu`` by ``empirical_gain``
   ``{axis: pixel, map}``.
 
+* ``iso<N>_dark_rate`` (normalised raw per second, >= 0): with darks at two exposure times or more, each
+  pixel's least-squares slope of its temporal-mean dark level against the exposure time (EMVA 1288
+  Release 4.0, sec. 8.4: the dark signal's rise with the exposure time, here per pixel), less the rise
+  the model's ``dark_current`` does not count as charge (``non_poisson_dn_per_s``): the dark current's
+  non-uniformity and the amplifier glow as this sensor has them. It replaces ``dark_current`` and
+  ``amp_glow`` by one ``empirical_field`` entry (Poisson electrons of that mean, ``electron`` the dark
+  current's gain), and the dark offset map above becomes the intercept at zero exposure (so a hot
+  pixel's rate is not counted twice).
+
 Each map also holds the temporal noise of its frames' mean (variance sigma_t^2 / n per pixel, as
 the standard's images do): with 16 dark frames and a DSNU comparable to the read noise, about 6 %
 of the map's variance. A map is written only for an effect the loop added; an ISO without the frames
@@ -29,9 +38,10 @@ import numpy as np
 
 from .diagnostics import plane_medians
 
-#: effects a dark offset map replaces, and those a flat gain map replaces
+#: effects a dark offset map replaces, those a flat gain map replaces, and those a dark-rate map replaces
 DARK_EFFECTS = ("dsnu", "column_fpn", "hot_pixels")
 FLAT_EFFECTS = ("prnu",)
+RATE_EFFECTS = ("dark_current", "amp_glow")
 MAPS_FILE = "maps.npz"
 
 
@@ -55,6 +65,21 @@ def _exposure(s) -> float:
     return float(s.exposure_s) if s.exposure_s is not None else -1.0
 
 
+def dark_slope(darks: list) -> tuple[np.ndarray, np.ndarray] | None:
+    """(slope DN/s, intercept DN) per pixel of the darks' temporal-mean images against their exposure
+    times, least squares weighted by the frame counts; None with fewer than two exposure times."""
+    pts = [(float(s.exposure_s), float(s.n), s.stats().mean_map) for s in darks if _exposure(s) >= 0]
+    if len({t for t, _, _ in pts}) < 2:
+        return None
+    w = np.array([n for _, n, _ in pts])
+    t = np.array([t for t, _, _ in pts])
+    tbar = float(np.sum(w * t) / w.sum())
+    mbar = sum(wi * m.astype(np.float64) for wi, (_, _, m) in zip(w, pts)) / w.sum()
+    num = sum(wi * (ti - tbar) * (m.astype(np.float64) - mbar) for wi, ti, (_, _, m) in zip(w, t, pts))
+    slope = num / float(np.sum(w * (t - tbar) ** 2))
+    return slope, mbar - slope * tbar
+
+
 def measured_maps(capture, results) -> tuple[dict[str, np.ndarray], dict[int, dict], list[str]]:
     """(arrays for ``maps.npz``, per ISO ``{"replaces": [effect types], "effects": [entries]}``, notes)."""
     arrays: dict[str, np.ndarray] = {}
@@ -69,11 +94,26 @@ def measured_maps(capture, results) -> tuple[dict[str, np.ndarray], dict[int, di
         tag = f"iso{int(r.iso)}" if r.iso > 0 else "iso_unknown"
         replaces, effects = [], []
         dark = min(darks, key=_exposure) if darks else None
+        intercept = None
+        if any(e in m.effects for e in RATE_EFFECTS):
+            fit = dark_slope(darks)
+            dc = m.effects.get("dark_current")
+            gain = float(dc.gain_dn_per_e) if dc is not None and dc.gain_dn_per_e > 0 else float(m.K)
+            if fit is None or not gain > 0:
+                notes.append(f"ISO {r.iso}: the dark-rate map needs darks at two exposure times or more and a "
+                             "system gain: not written")
+            else:
+                slope, intercept = fit
+                rise = slope - (float(dc.non_poisson_dn_per_s) if dc is not None else 0.0)
+                arrays[f"{tag}_dark_rate"] = (np.maximum(rise, 0.0) / fs).astype(np.float32)
+                replaces += [e for e in RATE_EFFECTS if e in m.effects]
+                effects.append({"type": "empirical_field", "field": f"{MAPS_FILE}#{tag}_dark_rate",
+                                "electron": gain / fs})
         if any(e in m.effects for e in DARK_EFFECTS):
             if dark is None:
                 notes.append(f"ISO {r.iso}: no dark sequence: the dark offset map is not written")
             else:
-                dm = dark.stats().mean_map.astype(np.float64)
+                dm = dark.stats().mean_map.astype(np.float64) if intercept is None else intercept
                 arrays[f"{tag}_dark_offset"] = ((dm - _site_median(dm, cfa)) / fs).astype(np.float32)
                 replaces += [e for e in DARK_EFFECTS if e in m.effects]
                 effects.append({"type": "empirical_offset", "axis": "pixel", "map": f"{MAPS_FILE}#{tag}_dark_offset"})

@@ -255,8 +255,10 @@ class EmpiricalCode(Effect):
 
 @register_effect
 class EmpiricalField(Effect):
-    """A measured smooth dark field (normalised raw per second, a low-resolution grid upsampled bilinearly),
-    accumulating over the exposure with its Poisson shot noise (``electron``: normalised raw per electron)."""
+    """A measured dark field (normalised raw per second) accumulating over the exposure with its Poisson
+    shot noise (``electron``: normalised raw per electron): a low-resolution grid of a smooth field,
+    upsampled bilinearly to the frame, or a per-pixel map at least the frame's size (``simcam loop
+    --maps``' dark-rate map), of which the frame takes the top-left part."""
 
     type: Literal["empirical_field"] = "empirical_field"
     field: str | list[list[float]]
@@ -268,6 +270,8 @@ class EmpiricalField(Effect):
         g = np.asarray(load_map(self.field) if isinstance(self.field, str) else self.field, dtype=np.float64)
         if g.ndim != 2 or (g < 0).any():
             raise NoiseModelError(f"effect {self.type!r}: field: expected a 2-D grid of rates >= 0")
+        if g.shape[0] >= shape[0] and g.shape[1] >= shape[1]:  # a per-pixel map of the sensor
+            return {"rate": g[: shape[0], : shape[1]].copy()}
         full = zoom(g, (shape[0] / g.shape[0], shape[1] / g.shape[1]), order=1, mode="nearest", grid_mode=True)
         return {"rate": full[: shape[0], : shape[1]]}
 
