@@ -1163,7 +1163,8 @@ def prnu_excess(d: CaptureData):
         return None
     cf = _cov_of_blocks(cf)
     dm = d.dark_map()
-    cd = _cov_of_blocks(fixed_cov_blocks(d, "darks")) if dm is not None and fixed_cov_blocks(d, "darks") else None
+    cdb = fixed_cov_blocks(d, "darks") if dm is not None else None
+    cd = _cov_of_blocks(cdb) if cdb else None
     out = []
     for k, (dy, dx) in enumerate(PLANE_OFFSETS):
         level = float(np.mean(m[dy::2, dx::2]))
