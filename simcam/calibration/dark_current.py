@@ -104,7 +104,7 @@ def series_fit(series: list, K: float | None) -> dict | None:
     is that of the per-pixel least-squares slopes of the temporal-mean images (row and column
     profiles removed: they are not pixel dark current; :func:`lognormal_log_sigma`).
     """
-    from .diagnostics import remove_profiles, robust_sigma
+    from .diagnostics import exposure_slope, remove_profiles, robust_sigma
 
     by_t: dict[float, list] = {}
     for t, f in series:
@@ -130,8 +130,7 @@ def series_fit(series: list, K: float | None) -> dict | None:
         # the frame index (a drift over the sequence is not sampling noise of its level)
         level_var.append(_level_variance([s.reshape(s.shape[0], -1).mean(axis=1) for s in stacks]))
     t = np.asarray(times)
-    c = (t - t.mean()) / np.sum((t - t.mean()) ** 2)
-    raw = sum(ci * m for ci, m in zip(c, maps))  # per-pixel least-squares slope (DN/s)
+    raw, c = exposure_slope(times, maps)  # per-pixel least-squares slope (DN/s)
     # hot pixels whose charge grows with the exposure are no dark current of the array: slopes beyond
     # 10 robust sigma above the median are left out of the mean slope (the mean over the others)
     keep = raw <= np.median(raw) + 10 * robust_sigma(raw)

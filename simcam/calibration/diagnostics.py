@@ -1508,6 +1508,15 @@ def dark_variance_slope(d: CaptureData):
     return float(np.polyfit(np.array(t), np.array(v), 1, w=np.sqrt(np.array(w)))[0])
 
 
+def exposure_slope(times, maps) -> tuple[np.ndarray, np.ndarray]:
+    """Per-pixel least-squares slope against the exposure time of ``maps`` (one temporal-mean image per
+    exposure time in ``times``, every time weighted alike): ``(sum_k c_k maps_k, c)`` with
+    ``c_k = (t_k - mean t) / sum (t - mean t)^2``, the coefficients the slope's noise propagates through."""
+    t = np.asarray(times, dtype=np.float64)
+    c = (t - t.mean()) / np.sum((t - t.mean()) ** 2)
+    return sum(ci * m for ci, m in zip(c, maps)), c
+
+
 def dark_slope_map(d: CaptureData) -> np.ndarray | None:
     """Per-pixel least-squares slope (DN/s) of the dark temporal-mean images against exposure time over
     :attr:`CaptureData.dark_series` (sequences of one exposure time pooled, frame-weighted), with each
@@ -1526,8 +1535,7 @@ def dark_slope_map(d: CaptureData) -> np.ndarray | None:
         for t in times:
             n = np.array([f.shape[0] for f in by_t[t]], dtype=np.float64)
             maps.append(sum(ni * f.astype(np.float64).mean(0) for ni, f in zip(n, by_t[t])) / n.sum())
-        c = (times - times.mean()) / np.sum((times - times.mean()) ** 2)
-        out = sum(ci * m for ci, m in zip(c, maps))
+        out = exposure_slope(times, maps)[0]
         for dy, dx in PLANE_OFFSETS:
             p = out[dy::2, dx::2]
             med = median_box(p, 5)

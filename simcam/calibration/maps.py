@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .diagnostics import plane_medians
+from .diagnostics import exposure_slope, plane_medians
 
 #: effects a dark offset map replaces, those a flat gain map replaces, and those a dark-rate map replaces
 DARK_EFFECTS = ("dsnu", "column_fpn", "hot_pixels")
@@ -67,17 +67,19 @@ def _exposure(s) -> float:
 
 def dark_slope(darks: list) -> tuple[np.ndarray, np.ndarray] | None:
     """(slope DN/s, intercept DN) per pixel of the darks' temporal-mean images against their exposure
-    times, least squares weighted by the frame counts; None with fewer than two exposure times."""
-    pts = [(float(s.exposure_s), float(s.n), s.stats().mean_map) for s in darks if _exposure(s) >= 0]
-    if len({t for t, _, _ in pts}) < 2:
+    times (the sequences of one time pooled, frame-weighted; :func:`diagnostics.exposure_slope`, the
+    loop's dark-current fit's estimator); None with fewer than two exposure times."""
+    by_t: dict[float, list] = {}
+    for s in darks:
+        if _exposure(s) >= 0:
+            by_t.setdefault(float(s.exposure_s), []).append(s)
+    if len(by_t) < 2:
         return None
-    w = np.array([n for _, n, _ in pts])
-    t = np.array([t for t, _, _ in pts])
-    tbar = float(np.sum(w * t) / w.sum())
-    mbar = sum(wi * m.astype(np.float64) for wi, (_, _, m) in zip(w, pts)) / w.sum()
-    num = sum(wi * (ti - tbar) * (m.astype(np.float64) - mbar) for wi, ti, (_, _, m) in zip(w, t, pts))
-    slope = num / float(np.sum(w * (t - tbar) ** 2))
-    return slope, mbar - slope * tbar
+    times = sorted(by_t)
+    maps = [sum(s.n * s.stats().mean_map.astype(np.float64) for s in by_t[t]) / sum(s.n for s in by_t[t])
+            for t in times]
+    slope, _ = exposure_slope(times, maps)
+    return slope, sum(maps) / len(maps) - slope * float(np.mean(times))
 
 
 def measured_maps(capture, results) -> tuple[dict[str, np.ndarray], dict[int, dict], list[str]]:
