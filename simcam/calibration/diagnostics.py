@@ -299,9 +299,10 @@ def plane_centre(m: np.ndarray) -> np.ndarray:
     return m - plane_medians(m)
 
 
-def robust_sigma(x: np.ndarray) -> float:
-    """1.4826 * MAD (sigma of a Gaussian)."""
-    med = np.median(x)
+def robust_sigma(x: np.ndarray, med=None) -> float:
+    """1.4826 * MAD (sigma of a Gaussian); ``med``: ``x``'s median where the caller has it already."""
+    if med is None:
+        med = np.median(x)
     return float(1.4826 * np.median(np.abs(x - med)))
 
 
@@ -1019,8 +1020,8 @@ def hot_pixel_tail(d: CaptureData):
 
 def _within(x: np.ndarray, k: float) -> np.ndarray:
     """Mask of the values of ``x`` less than ``k`` robust sigmas (:func:`robust_sigma`) from its median."""
-    dev = np.abs(x - np.median(x))
-    return dev < k * 1.4826 * float(np.median(dev))
+    med = np.median(x)
+    return np.abs(x - med) < k * robust_sigma(x, med)
 
 
 def _fixed_planes(frames: np.ndarray):
