@@ -129,12 +129,18 @@ def _plain_argument_help() -> None:
 _plain_argument_help()
 
 
-def __getattr__(name: str):
-    """``simcam.cli.app``: the app with every command, built on first use (a run of one command builds
-    an app with that command alone, :func:`main`)."""
-    if name == "app":
+def _full_app() -> typer.Typer:
+    """``simcam.cli.app``, the app with every command, built on first use."""
+    if "app" not in globals():
         globals()["app"] = build_app()
-        return globals()["app"]
+    return globals()["app"]
+
+
+def __getattr__(name: str):
+    """``simcam.cli.app`` (:func:`_full_app`; a run of one command builds an app with that command alone,
+    :func:`main`)."""
+    if name == "app":
+        return _full_app()
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
@@ -144,7 +150,7 @@ def _app_for(argv: list[str]) -> typer.Typer:
     if "app" in globals():  # built already (and perhaps extended by the caller): the one app
         return globals()["app"]
     word = next((a for a in argv if not a.startswith("-")), None)
-    return build_app([COMMANDS[word]]) if word in COMMANDS else __getattr__("app")
+    return build_app([COMMANDS[word]]) if word in COMMANDS else _full_app()
 
 
 def _click_exceptions() -> ModuleType:

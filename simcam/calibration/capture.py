@@ -280,22 +280,22 @@ def read_capture_set(path: str | Path, *, check_saturation: bool = True, region=
     dirs = sorted(p for p in path.iterdir() if p.is_dir())
     total = sum(len(_frame_files(d)) for d in dirs if not _is_sidd(d))
     with _progress(total, "reading frames", progress) as bar:
+        pool = None
         if threads > 1 and len(dirs) > 1:
             from concurrent.futures import ThreadPoolExecutor
 
-            with ThreadPoolExecutor(max_workers=min(threads, len(dirs))) as pool:
-                futures = [pool.submit(_read_sequence_dir, d, region, bar) for d in dirs]
-                try:
-                    for fut in futures:  # in directory order; the maps not kept are dropped as each arrives
-                        seqs.append(fut.result())
-                        keep_spatial_maps(seqs)
-                finally:
-                    for fut in futures:
-                        fut.cancel()
+            pool = ThreadPoolExecutor(max_workers=min(threads, len(dirs)))
+            futures = [pool.submit(_read_sequence_dir, d, region, bar) for d in dirs]
+            read = (f.result() for f in futures)
         else:
-            for d in dirs:
-                seqs.append(_read_sequence_dir(d, region, bar))
+            read = (_read_sequence_dir(d, region, bar) for d in dirs)
+        try:
+            for seq in read:  # in directory order; the maps not kept are dropped as each sequence arrives
+                seqs.append(seq)
                 keep_spatial_maps(seqs)
+        finally:
+            if pool is not None:  # after an error: the sequences not started are not read
+                pool.shutdown(wait=True, cancel_futures=True)
     if not seqs:
         raise DatasetError(f"{path}: no sequence sub-directories; expected dark*/, flat*/ or scene directories of frames")
     cs = CaptureSet(str(path), "directory", seqs)
