@@ -61,6 +61,15 @@ def test_several_rules_at_once_match_each_rule_alone():
     assert loose[0].sum() > strict[0].sum()  # the single-frame pixels only count for the loose rule
 
 
+def _apply(net, rows):
+    """The comparator network ``net`` applied to each row of ``rows`` (a copy), with numpy."""
+    v = rows.copy()
+    for a, b in net:
+        lo, hi = np.minimum(v[:, a], v[:, b]), np.maximum(v[:, a], v[:, b])
+        v[:, a], v[:, b] = lo, hi
+    return v
+
+
 @pytest.mark.parametrize("n", [2, 4, 8, 16, 32])
 def test_batcher_network_sorts_every_zero_one_input(n):
     """The 0-1 principle (Knuth, TAOCP vol. 3, sec. 5.3.4, ex. 36): a comparator network sorts every input iff
@@ -68,22 +77,14 @@ def test_batcher_network_sorts_every_zero_one_input(n):
     net = batcher_network(n)
     rng = np.random.default_rng(n)
     rows = (np.arange(2 ** n)[:, None] >> np.arange(n)) & 1 if n <= 16 else rng.integers(0, 2, (20000, n))
-    v = rows.copy()
-    for a, b in net:
-        lo, hi = np.minimum(v[:, a], v[:, b]), np.maximum(v[:, a], v[:, b])
-        v[:, a], v[:, b] = lo, hi
-    assert np.array_equal(v, np.sort(rows, axis=1))
+    assert np.array_equal(_apply(net, rows), np.sort(rows, axis=1))
 
 
 @pytest.mark.parametrize("m", [9, 25, 49])
 def test_selection_network_places_the_median(m):
     rng = np.random.default_rng(m)
     x = np.round(rng.normal(0, 2, (5000, m)))  # ties
-    v = x.copy()
-    for a, b in selection_network(m, m // 2):
-        lo, hi = np.minimum(v[:, a], v[:, b]), np.maximum(v[:, a], v[:, b])
-        v[:, a], v[:, b] = lo, hi
-    assert np.array_equal(v[:, m // 2], np.median(x, axis=1))
+    assert np.array_equal(_apply(selection_network(m, m // 2), x)[:, m // 2], np.median(x, axis=1))
 
 
 @pytest.mark.parametrize("shape", [(64, 80), (7, 9), (1, 5), (6, 1), (2, 2), (1, 1)])
