@@ -383,12 +383,23 @@ def ptc_curvature(d: CaptureData):
     plane, relative to its slope: the quadratic coefficient times the highest level over the linear one,
     averaged over the planes. The darks are a point of the curve (mean 0, the read variance), so darks and
     two flat levels already give the three points a curvature needs (an EMVA 1288-style set with two
-    illuminations)."""
+    illuminations).
+
+    Darks narrower than one ADC code (temporal variance below the uniform quantiser's ``step^2 / 12``, the
+    step read off the used codes, :func:`code_grid_codes`) are not a point of the curve: their variance is
+    set by where the code edges around the black level lie (a differential non-linearity moves it as much
+    as the read noise does), the regime where Sheppard's correction does not hold (EMVA 1288 Release 4.0,
+    sec. 2). The curvature then comes from three flat levels or more, else it is not applicable."""
     darks, flats = d.ptc_points()
+    mu0 = np.mean([p[:, 0] for p in darks], axis=0) if darks else np.zeros(4)
+    if darks and np.mean([p[:, 1] for p in darks]) < dark_quantiser_floor(d):
+        if len(flats) < 3:
+            raise NotApplicable("the darks sit inside one ADC code (temporal variance below step^2/12) and "
+                                "fewer than 3 flat levels are left for the curvature")
+        darks = []
     if len(flats) + (1 if darks else 0) < 3:
         return None
     pts = np.array(darks + flats)  # (m, 4, 2)
-    mu0 = np.mean([p[:, 0] for p in darks], axis=0) if darks else np.zeros(4)
     t = []
     for c in range(4):
         x = pts[:, c, 0] - mu0[c]
@@ -1328,6 +1339,16 @@ def code_grid_codes(d: CaptureData) -> np.ndarray | None:
                 break
     d.cache["code_grid"] = codes
     return codes
+
+
+def dark_quantiser_floor(d: CaptureData) -> float:
+    """``step^2 / 12`` (DN^2) of the ADC's lattice (the median gap between the codes of
+    :func:`code_grid_codes`, at least 1 DN): the temporal variance a uniform quantiser adds to noise
+    spread over many codes, and more than darks confined inside one code can show."""
+    codes = code_grid_codes(d)
+    gaps = np.diff(codes) if codes is not None and codes.size > 1 else np.zeros(0)
+    step = max(float(np.median(gaps)), 1.0) if gaps.size else 1.0
+    return step * step / 12.0
 
 
 def code_occupancy(d: CaptureData):
