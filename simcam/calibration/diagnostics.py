@@ -386,13 +386,13 @@ def ptc_curvature(d: CaptureData):
     illuminations).
 
     Darks narrower than one ADC code (temporal variance below the uniform quantiser's ``step^2 / 12``, the
-    step read off the used codes, :func:`code_grid_codes`) are not a point of the curve: their variance is
+    step read off the used codes, :func:`adc_step`) are not a point of the curve: their variance is
     set by where the code edges around the black level lie (a differential non-linearity moves it as much
     as the read noise does), the regime where Sheppard's correction does not hold (EMVA 1288 Release 4.0,
     sec. 2). The curvature then comes from three flat levels or more, else it is not applicable."""
     darks, flats = d.ptc_points()
     mu0 = np.mean([p[:, 0] for p in darks], axis=0) if darks else np.zeros(4)
-    if darks and np.mean([p[:, 1] for p in darks]) < dark_quantiser_floor(d):
+    if darks and np.mean([p[:, 1] for p in darks]) < adc_step(d) ** 2 / 12.0:
         if len(flats) < 3:
             raise NotApplicable("the darks sit inside one ADC code (temporal variance below step^2/12) and "
                                 "fewer than 3 flat levels are left for the curvature")
@@ -1341,14 +1341,11 @@ def code_grid_codes(d: CaptureData) -> np.ndarray | None:
     return codes
 
 
-def dark_quantiser_floor(d: CaptureData) -> float:
-    """``step^2 / 12`` (DN^2) of the ADC's lattice (the median gap between the codes of
-    :func:`code_grid_codes`, at least 1 DN): the temporal variance a uniform quantiser adds to noise
-    spread over many codes, and more than darks confined inside one code can show."""
+def adc_step(d: CaptureData) -> float:
+    """The ADC's step (DN): the median gap between the codes of :func:`code_grid_codes`, at least 1 DN."""
     codes = code_grid_codes(d)
-    gaps = np.diff(codes) if codes is not None and codes.size > 1 else np.zeros(0)
-    step = max(float(np.median(gaps)), 1.0) if gaps.size else 1.0
-    return step * step / 12.0
+    gaps = np.diff(codes) if codes is not None else np.zeros(0)
+    return max(float(np.median(gaps)) if gaps.size else 1.0, 1.0)
 
 
 def code_occupancy(d: CaptureData):

@@ -55,11 +55,9 @@ def dark_temporal_variance(darks) -> float:
 class QuantizationCard(DeclaredProfileCard, name="quantization", params=Quantization, diagnostics=("code_occupancy",)):
 
     def fit(self, d, model, ctx):
-        from ..diagnostics import code_grid_codes
+        from ..diagnostics import adc_step
 
-        codes = code_grid_codes(d)
-        gaps = np.diff(codes) if codes is not None else np.zeros(0)
-        p = Quantization(step_dn=max(float(np.median(gaps)) if gaps.size else 1.0, 1.0))
+        p = Quantization(step_dn=adc_step(d))
         if p.step_dn <= 1.0 or ctx.simulate is None or not ctx.dark_specs or not d.darks:
             return p
         target = dark_temporal_variance(d.darks)
