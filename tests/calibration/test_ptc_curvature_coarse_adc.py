@@ -1,7 +1,7 @@
 """The photon-transfer curvature under a coarse ADC whose darks sit inside one code.
 
 The capture sets are made here with numpy: a linear sensor (Poisson photo-electrons, Gaussian read
-noise), an ADC of 10-DN codes whose transition levels are displaced at random (a differential
+noise), an ADC of 10-DN codes (in one test with its transition levels displaced at random: a differential
 non-linearity), the black level in the middle of a code. The darks then show no temporal variance at all,
 while the flats, spread over a few codes, carry the extra variance of the uneven code widths: a quadratic
 through the dark point and two flat levels bends although the response is linear, which is how an
