@@ -984,7 +984,10 @@ def telegraph_split(d: CaptureData) -> tuple[np.ndarray, np.ndarray, np.ndarray,
     """Random-telegraph pixels of the darks (:func:`two_level_split` on all dark frames, each frame's row
     and column means removed; sigma^2 the 1 %-trimmed mean of the per-pixel temporal variances, i.e. the
     read noise): (two-level mask, gap map (DN), high-level count map, frame count, sigma^2, mask of the
-    pixels that are two-level with one frame on a level allowed and :data:`RTN_HOT_EXCLUDE`'s bounds)."""
+    pixels that are two-level with one frame on a level allowed and :data:`RTN_HOT_EXCLUDE`'s bounds).
+    Not applicable to darks inside one ADC code (sigma^2 below ``step^2 / 12``, :func:`adc_step`): every
+    pixel near a code edge then sits on two codes a step apart, many read-noise sigmas, and how many do
+    depends on where the edges lie (a differential non-linearity moves them), not on traps."""
     if "telegraph" not in d.cache:
         if not d.darks:
             d.cache["telegraph"] = None
@@ -999,6 +1002,9 @@ def telegraph_split(d: CaptureData) -> tuple[np.ndarray, np.ndarray, np.ndarray,
         s2 = float(sst.trim_mean(np.var(v, axis=0, ddof=1), 0.01))
         if not s2 > 0:
             raise NotApplicable("the dark frames' temporal variance is 0 (constant or quantisation-dominated darks)")
+        if s2 < adc_step(d) ** 2 / 12.0:  # as ptc_curvature's darks inside one code
+            raise NotApplicable("the darks sit inside one ADC code (temporal variance below step^2/12): a pixel's "
+                                "occasional step to the next code is the quantiser's, not a second level")
         (mask, gap, high), (loose, _g, _h) = two_level_splits(v, s2, [(2, RTN_GAP_SIGMA, RTN_LEVEL_VAR),
                                                                       (1, *RTN_HOT_EXCLUDE)])
         shape = x.shape[1:]
