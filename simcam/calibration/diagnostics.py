@@ -987,30 +987,39 @@ def telegraph_split(d: CaptureData) -> tuple[np.ndarray, np.ndarray, np.ndarray,
     pixels that are two-level with one frame on a level allowed and :data:`RTN_HOT_EXCLUDE`'s bounds).
     Not applicable to darks inside one ADC code (sigma^2 below ``step^2 / 12``, :func:`adc_step`): every
     pixel near a code edge then sits on two codes a step apart, many read-noise sigmas, and how many do
-    depends on where the edges lie (a differential non-linearity moves them), not on traps."""
+    depends on where the edges lie (a differential non-linearity moves them), not on traps. Computed once
+    per capture, a :class:`NotApplicable` too (it is raised again on each call)."""
     if "telegraph" not in d.cache:
-        if not d.darks:
-            d.cache["telegraph"] = None
-            return None
-        x = np.concatenate(d.darks).astype(np.float64)
-        n = x.shape[0]
-        if n < 4:
-            raise NotApplicable("fewer than 4 dark frames: two levels of >= 2 frames each are not told apart")
-        x -= x.mean(axis=2, keepdims=True)
-        x -= x.mean(axis=1, keepdims=True)
-        v = x.reshape(n, -1)
-        s2 = float(sst.trim_mean(np.var(v, axis=0, ddof=1), 0.01))
-        if not s2 > 0:
-            raise NotApplicable("the dark frames' temporal variance is 0 (constant or quantisation-dominated darks)")
-        if s2 < adc_step(d) ** 2 / 12.0:  # as ptc_curvature's darks inside one code
-            raise NotApplicable("the darks sit inside one ADC code (temporal variance below step^2/12): a pixel's "
-                                "occasional step to the next code is the quantiser's, not a second level")
-        (mask, gap, high), (loose, _g, _h) = two_level_splits(v, s2, [(2, RTN_GAP_SIGMA, RTN_LEVEL_VAR),
-                                                                      (1, *RTN_HOT_EXCLUDE)])
-        shape = x.shape[1:]
-        d.cache["telegraph"] = (mask.reshape(shape), gap.reshape(shape), high.reshape(shape), n, s2,
-                                loose.reshape(shape))
+        try:
+            d.cache["telegraph"] = _telegraph(d)
+        except NotApplicable as exc:
+            d.cache["telegraph"] = exc
+    if isinstance(d.cache["telegraph"], NotApplicable):
+        raise d.cache["telegraph"]
     return d.cache["telegraph"]
+
+
+def _telegraph(d: CaptureData):
+    """:func:`telegraph_split`'s computation (uncached)."""
+    if not d.darks:
+        return None
+    x = np.concatenate(d.darks).astype(np.float64)
+    n = x.shape[0]
+    if n < 4:
+        raise NotApplicable("fewer than 4 dark frames: two levels of >= 2 frames each are not told apart")
+    x -= x.mean(axis=2, keepdims=True)
+    x -= x.mean(axis=1, keepdims=True)
+    v = x.reshape(n, -1)
+    s2 = float(sst.trim_mean(np.var(v, axis=0, ddof=1), 0.01))
+    if not s2 > 0:
+        raise NotApplicable("the dark frames' temporal variance is 0 (constant or quantisation-dominated darks)")
+    if s2 < adc_step(d) ** 2 / 12.0:  # as ptc_curvature's darks inside one code
+        raise NotApplicable("the darks sit inside one ADC code (temporal variance below step^2/12): a pixel's "
+                            "occasional step to the next code is the quantiser's, not a second level")
+    (mask, gap, high), (loose, _g, _h) = two_level_splits(v, s2, [(2, RTN_GAP_SIGMA, RTN_LEVEL_VAR),
+                                                                  (1, *RTN_HOT_EXCLUDE)])
+    shape = x.shape[1:]
+    return mask.reshape(shape), gap.reshape(shape), high.reshape(shape), n, s2, loose.reshape(shape)
 
 
 def _telegraph_mask(d: CaptureData) -> np.ndarray | np.bool_:
