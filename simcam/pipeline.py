@@ -29,6 +29,7 @@ from pydantic import ValidationError
 
 from .errors import PipelineError, SimcamError
 from .frame import SIGNAL_KINDS, RawFrame
+from .row_fusion import run_stages
 from .stages.base import Stage, get_stage_class
 from .yamlio import load_yaml
 
@@ -197,11 +198,7 @@ class Pipeline:
                                     f"{[s.type for s in random_stages]}: pass seed=")
             children = np.random.SeedSequence([int(seed), int(epoch), int(index)]).spawn(len(self.stages))
             rngs = [np.random.default_rng(c) for c in children]
-        for k, stage in enumerate(self.stages):
-            frame = stage(frame, rngs[k] if rngs else None)
-            if progress is not None:
-                progress(stage.type)
-        return frame
+        return run_stages(self.stages, frame, rngs, progress)
 
     run = __call__
 

@@ -78,6 +78,54 @@ def _check_finite_levels(meta, black, white) -> None:
                             f"BlackLevelDeltaH/V)")
 
 
+def _levels(frame: RawFrame, shape: tuple[int, ...], black_level: float | None, white_level: float | None):
+    """``(black, cell, scale)``: the black level (a float32 scalar, the per-site cell or the H x W map),
+    the cell (or None) and ``white - black``, after the checks of :func:`normalize`."""
+    meta = frame.meta
+    cell = None
+    if black_level is not None:
+        black = np.float32(black_level)
+    else:
+        cell = black_level_cell(meta, shape)
+        black = cell if cell is not None else black_level_map(meta, shape)
+    white = np.float32(white_level if white_level is not None else meta.white_level)
+    _check_finite_levels(meta, black, white)
+    scale = white - black
+    if np.any(scale <= 0):
+        raise MetadataError(
+            f"{meta.source or 'frame'}: WhiteLevel: expected white ({float(white)}) above the black level "
+            f"(max {float(np.max(black))})")
+    return black, cell, scale
+
+
+def normalize_rows(frame: RawFrame, *, black_level: float | None = None, white_level: float | None = None):
+    """:func:`normalize` as a map of rows, ``fn(src, dst, r0)`` (rows ``r0 ..`` of the mosaic into float32
+    ``dst``, which may be ``src``), when the black level is one per-site cell and there is no
+    linearization table; None otherwise. Raises the errors of :func:`normalize`."""
+    meta = frame.meta
+    if meta.linearization_table is not None or black_level is not None or np.ndim(frame.data) != 2:
+        return None
+    _, cell, scale = _levels(frame, np.shape(frame.data), None, white_level)
+    return None if cell is None else _cell_rows(cell, scale, np.shape(frame.data)[1])
+
+
+def _cell_rows(cell: np.ndarray, scale: np.ndarray, w: int):
+    """``fn(src, dst, r0)``: rows ``r0 ..`` of a DN mosaic minus the per-site black ``cell``, over ``scale``."""
+    r, c = cell.shape
+    black_rows, scale_rows = np.tile(cell, (1, w // c)), np.tile(scale, (1, w // c))
+
+    def fn(src: np.ndarray, dst: np.ndarray, r0: int) -> None:
+        src = np.asarray(src)
+        if src.dtype not in (np.uint8, np.uint16, np.float32):  # exact in float32: cast inside the subtraction
+            src = src.astype(np.float32)
+        for i in range(r):  # contiguous rows: SIMD inner loops, no float32 copy of the DN mosaic
+            k = (i - r0) % r  # the first row of this band whose mosaic row is i modulo the cell
+            np.subtract(src[k::r], black_rows[i], out=dst[k::r], dtype=np.float32)
+            np.divide(dst[k::r], scale_rows[i], out=dst[k::r])
+
+    return fn
+
+
 def normalize(frame: RawFrame, *, black_level: float | None = None, white_level: float | None = None) -> RawFrame:
     """DN -> normalised raw: linearization, per-site black (with deltas), white. No clipping.
 
@@ -112,29 +160,11 @@ def normalize(frame: RawFrame, *, black_level: float | None = None, white_level:
     if meta.linearization_table is not None:
         table = np.asarray(meta.linearization_table, dtype=np.float32)
         data = table[np.clip(data, 0, table.size - 1).astype(np.int64)]
-    cell = None
-    if black_level is not None:
-        black = np.float32(black_level)
-    else:
-        cell = black_level_cell(meta, data.shape)
-        black = cell if cell is not None else black_level_map(meta, data.shape)
-    white = np.float32(white_level if white_level is not None else meta.white_level)
-    _check_finite_levels(meta, black, white)
-    scale = white - black
-    if np.any(scale <= 0):
-        raise MetadataError(
-            f"{meta.source or 'frame'}: WhiteLevel: expected white ({float(white)}) above the black level "
-            f"(max {float(np.max(black))})")
+    black, cell, scale = _levels(frame, np.shape(data), black_level, white_level)
     if cell is not None:  # per-site constants: one full-width row pattern per cell row, no H x W map
-        (h, w), (r, c) = data.shape, cell.shape
         data = np.asarray(data)
-        if data.dtype not in (np.uint8, np.uint16, np.float32):  # exact in float32: cast inside the subtraction
-            data = data.astype(np.float32)
-        black_rows, scale_rows = np.tile(cell, (1, w // c)), np.tile(scale, (1, w // c))
-        out = np.empty((h, w), dtype=np.float32)
-        for i in range(r):  # contiguous rows: SIMD inner loops, no float32 copy of the DN mosaic
-            np.subtract(data[i::r], black_rows[i], out=out[i::r], dtype=np.float32)
-            np.divide(out[i::r], scale_rows[i], out=out[i::r])
+        out = np.empty(data.shape, dtype=np.float32)
+        _cell_rows(cell, scale, data.shape[1])(data, out, 0)
     else:
         out = (data - black) / scale
     return frame.evolve(out.astype(np.float32, copy=False), kind="raw", step="normalize")

@@ -6,12 +6,16 @@ signal kinds it accepts and produces (``class Gamma(Stage, type="gamma", accepts
 produces=...)``), checks of its parameters beyond their types (``check_params``) and
 a deterministic ``apply``. Stages that draw random numbers declare ``random=True`` and
 implement ``sample(rng, frame) -> dict``; the pipeline passes what was drawn to
-``apply(frame, drawn)``.
+``apply(frame, drawn)``. A stage whose output row depends only on the same input row (a
+per-pixel or per-site map, e.g. ``normalize``, ``white_balance`` with known gains, ``clip``)
+may also describe that map as a :class:`RowOp` (``row_op(frame)``), so that the pipeline can run
+several such stages on bands of rows in one buffer (:mod:`simcam.row_fusion`).
 """
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from dataclasses import dataclass
+from typing import Any, Callable, ClassVar
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict
@@ -44,6 +48,25 @@ class StageParams(BaseModel):
     """
 
     model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
+
+
+@dataclass(frozen=True)
+class RowOp:
+    """A stage's action on ``frame`` as a map of rows (see :meth:`Stage.row_op`).
+
+    Attributes
+    ----------
+    fn : callable
+        ``fn(src, dst, r0)`` writes the float32 output rows ``r0 .. r0 + len(src)`` into ``dst``
+        from the input rows ``src`` (the same shape; ``dst`` may be ``src`` itself): exactly the
+        values :meth:`Stage.apply` gives on those rows.
+    result : callable
+        ``result(frame, data)``: the frame :meth:`Stage.apply` returns, with ``data`` as its pixels
+        (metadata, kind and history as ``apply`` sets them).
+    """
+
+    fn: Callable[[np.ndarray, np.ndarray, int], None]
+    result: Callable[[RawFrame, np.ndarray], RawFrame]
 
 
 class Stage:
@@ -118,6 +141,12 @@ class Stage:
 
     def apply(self, frame: RawFrame, drawn: dict[str, Any] | None = None) -> RawFrame:
         raise NotImplementedError
+
+    def row_op(self, frame: RawFrame) -> RowOp | None:
+        """This stage on ``frame`` as a :class:`RowOp`, or None (the default: it is not a map of rows,
+        or not for this frame). Only the frame's metadata, kind, shape and dtype may be read, never its
+        pixel values (they may not be computed yet); the checks of :meth:`apply` raise here as there."""
+        return None
 
     def __call__(self, frame: RawFrame, rng: np.random.Generator | None = None) -> RawFrame:
         self.check_input(frame)

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..errors import StageError
 from ..frame import SIGNAL_KINDS, RawFrame
-from .base import Stage, StageParams, register_stage
+from .base import RowOp, Stage, StageParams, register_stage
 
 _NOT_DN = frozenset(k for k in SIGNAL_KINDS if k != "raw_dn")
 
@@ -35,6 +35,16 @@ class Clip(Stage, type="clip", accepts=_NOT_DN):
             return frame.evolve(step=self.type)
         data = np.clip(frame.data, lo, hi).astype(np.float32, copy=False)
         return frame.evolve(data, step=self.type)
+
+    def row_op(self, frame: RawFrame) -> RowOp | None:
+        lo, hi = self.params.low, self.params.high
+        if lo is None and hi is None:
+            return None
+
+        def fn(src: np.ndarray, dst: np.ndarray, r0: int) -> None:
+            np.clip(src, lo, hi, out=dst)  # a float64 input is clipped in float64, then rounded, as in apply
+
+        return RowOp(fn, lambda f, data: f.evolve(data, step=self.type))
 
 
 @register_stage

@@ -16,8 +16,8 @@ import numpy as np
 from ..cfa import shift_pattern
 from ..errors import StageError
 from ..frame import MOSAIC_KINDS, SIGNAL_KINDS, RawFrame
-from ..raw import normalize
-from .base import Stage, StageParams, register_stage
+from ..raw import normalize, normalize_rows
+from .base import RowOp, Stage, StageParams, register_stage
 
 
 @register_stage
@@ -32,6 +32,10 @@ class Normalize(Stage, type="normalize", accepts=frozenset({"raw_dn"}), produces
 
     def apply(self, frame: RawFrame, drawn=None) -> RawFrame:
         return normalize(frame, black_level=self.params.black_level, white_level=self.params.white_level)
+
+    def row_op(self, frame: RawFrame) -> RowOp | None:
+        fn = normalize_rows(frame, black_level=self.params.black_level, white_level=self.params.white_level)
+        return None if fn is None else RowOp(fn, lambda f, data: f.evolve(data, kind="raw", step="normalize"))
 
 
 def _int_rect(values, what: str, source: str) -> tuple[int, int, int, int]:

@@ -22,7 +22,7 @@ from ..cfa import site_colour_index
 from ..colour.dng import DngColorProfile, check_vector, xy_to_camera_neutral
 from ..errors import MetadataError, StageError
 from ..frame import RawFrame
-from .base import Stage, StageParams, register_stage
+from .base import RowOp, Stage, StageParams, register_stage
 
 
 def capture_neutral(meta) -> np.ndarray:
@@ -43,16 +43,28 @@ def apply_gains(frame: RawFrame, gains: np.ndarray) -> np.ndarray:
     g = np.asarray(gains, dtype=np.float32)
     if frame.data.ndim == 3:
         return (frame.data * g).astype(np.float32)
+    data = np.asarray(frame.data)
+    out = np.empty(data.shape, dtype=np.float32)
+    mosaic_gain_rows(frame, gains)(data, out, 0)
+    return out
+
+
+def mosaic_gain_rows(frame: RawFrame, gains: np.ndarray):
+    """:func:`apply_gains` on a mosaic as a map of rows, ``fn(src, dst, r0)`` (rows ``r0 ..`` into float32
+    ``dst``, which may be ``src``)."""
     if frame.meta.cfa is None:
         raise StageError(f"{frame.meta.source or 'frame'}: cfa: a mosaic needs meta.cfa to be white-balanced")
+    g = np.asarray(gains, dtype=np.float32)
     idx = site_colour_index(frame.meta.cfa)
-    data = np.asarray(frame.data)
-    h, w = data.shape
-    out = np.empty((h, w), dtype=np.float32)
-    for dy in range(2):  # one gain row per CFA row: contiguous rows (SIMD loops) instead of strided sites
-        row = np.resize(g[idx[dy]], w)
-        np.multiply(data[dy::2], row, out=out[dy::2], dtype=np.float32)
-    return out
+    w = np.shape(frame.data)[1]
+    rows = [np.resize(g[idx[dy]], w) for dy in range(2)]
+
+    def fn(src: np.ndarray, dst: np.ndarray, r0: int) -> None:
+        for dy in range(2):  # one gain row per CFA row: contiguous rows (SIMD loops) instead of strided sites
+            k = (dy - r0) % 2  # the first row of this band on CFA row dy
+            np.multiply(src[k::2], rows[dy], out=dst[k::2], dtype=np.float32)
+
+    return fn
 
 
 def cell_rgb(frame: RawFrame) -> np.ndarray:
@@ -184,3 +196,12 @@ class WhiteBalance(Stage, type="white_balance", accepts=frozenset({"raw", "camer
         prev = meta.white_balance_gains
         meta.white_balance_gains = gains if prev is None else np.asarray(prev, dtype=np.float64) * gains
         return frame.evolve(apply_gains(frame, gains), meta=meta, step=self.type)
+
+    def row_op(self, frame: RawFrame) -> RowOp | None:
+        if self.effective_source in ("none", "grey_world", "white_patch", "spot") or np.ndim(frame.data) != 2:
+            return None  # no change, or gains estimated from the pixels
+        gains = self.gains_for(frame)
+        meta = frame.meta.copy()
+        prev = meta.white_balance_gains
+        meta.white_balance_gains = gains if prev is None else np.asarray(prev, dtype=np.float64) * gains
+        return RowOp(mosaic_gain_rows(frame, gains), lambda f, data: f.evolve(data, meta=meta, step=self.type))
