@@ -273,4 +273,14 @@ def _dispatch(command, argv: list[str], *, name: str, debug: bool, usage_only: b
 
 
 def entry() -> None:  # console_scripts target
-    sys.exit(main())
+    status = main()
+    # The command is over: its outputs are written and closed. The interpreter's shutdown would now
+    # walk every object the imports made (pydantic's and typer's schemas, numpy's, the stage models)
+    # in its final garbage collections, ~0.05 s of a 0.6 s render; frozen, they are left to the OS
+    # (reference counting, atexit hooks and flushes still run). Not once OpenImageIO is loaded: its
+    # binding (nanobind) reports the instances still alive when it is torn down.
+    if "OpenImageIO" not in sys.modules:
+        import gc
+
+        gc.freeze()
+    sys.exit(status)

@@ -20,7 +20,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("cfa",),
     ("frame", "raw"),
     ("io", "colour", "demosaic", "noise"),
-    ("stages", "profiles"),
+    ("stages", "profiles", "row_fusion"),
     ("pipeline", "render_samples"),
     ("synth", "groundtruth", "denoise", "training", "calibration", "torch", "trainingset", "batch",
      "batch_worker"),

@@ -51,41 +51,55 @@ def render(
 ) -> None:
     """Render raw DNGs through a pipeline to PNG / TIFF / EXR / JPEG (one file, or a batch on dask)."""
     from ..io.inputs import is_pattern
-    from ..io.outputs import check_output_file
-    from ..jobs import render_file
-    from ..pipeline import Pipeline
 
-    overrides = parse_set_options(set_)
     batch = (len(inputs) > 1 or any(is_pattern(i) or Path(i).is_dir() for i in inputs)
              or output.is_dir() or not output.suffix)
-    if not batch:
-        from ..io.images import resolve_compression, resolve_depth
+    reading = warming = None
+    if not batch:  # LibRaw decodes the DNG (C code, the GIL released) while this process imports and builds
+        from concurrent.futures import ThreadPoolExecutor
 
-        check_output_file(output, option="-o", inputs=inputs)
-        resolve_depth(output, depth)  # fail on a bad format before any work
-        resolve_compression(output, compression)
-    pipe = Pipeline.from_yaml(pipeline)
-    if overrides:
-        pipe = pipe.with_overrides(overrides)
-    if batch:
-        if thumbnail is not None:
-            from ..errors import SimcamError
+        from ..io.dng import read_dng
 
-            raise SimcamError(f"--thumbnail {thumbnail}: expected one input and one output file, not a batch")
-        raise typer.Exit(_render_batch(inputs, output, pipe, depth=depth, seed=seed, fmt=fmt, workers=workers,
-                                       scheduler=scheduler, resume=resume,
-                                       write={"quality": quality, "compression": compression}))
-    from tqdm import tqdm
+        reading = ThreadPoolExecutor(1, thread_name_prefix="simcam-read")
+        frame_read = reading.submit(read_dng, inputs[0])
+    try:
+        from ..io.outputs import check_output_file
+        from ..jobs import render_file
+        from ..pipeline import Pipeline
 
-    from ..io.dng import read_dng
+        overrides = parse_set_options(set_)
+        if not batch:
+            from ..io.images import resolve_compression, resolve_depth
 
-    frame = read_dng(inputs[0])
-    # a bar for large frames on a terminal only (disable=None: silent when stderr is not a TTY)
-    with tqdm(total=len(pipe.stages), desc=f"render {inputs[0].name}", unit="stage", leave=False,
-              disable=None if frame.width * frame.height >= 4_000_000 else True) as bar:
-        info = render_file(inputs[0], output, pipeline=pipe, depth=depth, seed=seed, frame=frame,
-                           progress=lambda name: (bar.set_postfix_str(name), bar.update(1)),
-                           quality=quality, compression=compression, thumbnail=thumbnail)
+            check_output_file(output, option="-o", inputs=inputs)
+            resolve_depth(output, depth)  # fail on a bad format before any work
+            resolve_compression(output, compression)
+        pipe = Pipeline.from_yaml(pipeline)
+        if overrides:
+            pipe = pipe.with_overrides(overrides)
+        if batch:
+            if thumbnail is not None:
+                from ..errors import SimcamError
+
+                raise SimcamError(f"--thumbnail {thumbnail}: expected one input and one output file, not a batch")
+            raise typer.Exit(_render_batch(inputs, output, pipe, depth=depth, seed=seed, fmt=fmt, workers=workers,
+                                           scheduler=scheduler, resume=resume,
+                                           write={"quality": quality, "compression": compression}))
+        from tqdm import tqdm
+
+        warming = pipe.warm_in_background()  # e.g. numba's set-up for Menon 2007, while the DNG is decoded
+        frame = frame_read.result()  # the reader's errors, after those of the options and the pipeline
+        # a bar for large frames on a terminal only (disable=None: silent when stderr is not a TTY)
+        with tqdm(total=len(pipe.stages), desc=f"render {inputs[0].name}", unit="stage", leave=False,
+                  disable=None if frame.width * frame.height >= 4_000_000 else True) as bar:
+            info = render_file(inputs[0], output, pipeline=pipe, depth=depth, seed=seed, frame=frame,
+                               progress=lambda name: (bar.set_postfix_str(name), bar.update(1)),
+                               quality=quality, compression=compression, thumbnail=thumbnail)
+    finally:  # the reader done (its capture of fd 2 over) before an error line is printed
+        if reading is not None:
+            reading.shutdown(wait=True)
+        if warming is not None:
+            warming.join()
     typer.echo(f"wrote {output} ({info['width']}x{info['height']}, {info['kind']}, pipeline {pipe.name or pipe.source})")
 
 

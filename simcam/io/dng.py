@@ -87,17 +87,25 @@ def _tifffile_log():
 
 
 class _Fd2Capture:
-    """Redirect file descriptor 2 into a temporary file while LibRaw runs.
+    """Redirect file descriptor 2 into a temporary file while LibRaw decodes ``name``.
 
-    LibRaw reports corrupt data with ``fprintf(stderr, ...)`` from C ("Unexpected end of file",
-    "data corrupted at ..."), below Python's ``sys.stderr``. Overlapping captures (threads) share
-    one redirection; each gets the text written during its own window in :attr:`text`.
+    LibRaw reports corrupt data from C, below Python's ``sys.stderr``, through its data callback:
+    ``fprintf(stderr, "%s: Unexpected end of file\n", fname)`` and ``"%s: data corrupted at %d\n"``
+    (LibRaw 0.21, ``default_data_callback``), always led by the file name it was given. :attr:`text`
+    holds the lines led by ``name`` written during this capture. Overlapping captures (threads) share
+    one redirection; whatever else reached fd 2 meanwhile (another thread's output: a warning, an
+    error line, ``-X importtime``) is not this file's report and is written to the real stderr when
+    the redirection ends.
     """
 
     _lock = threading.Lock()
     _users = 0
     _saved: int | None = None
     _file = None
+    _names: set[str] = set()
+
+    def __init__(self, name: str):
+        self.name = str(name)
 
     def __enter__(self) -> "_Fd2Capture":
         cls = type(self)
@@ -112,6 +120,7 @@ class _Fd2Capture:
                 cls._file, cls._saved = tempfile.TemporaryFile(), saved
                 os.dup2(cls._file.fileno(), 2)
             cls._users += 1
+            cls._names.add(self.name)
             self._active = True
             self._start = os.lseek(cls._file.fileno(), 0, os.SEEK_END)
         return self
@@ -124,17 +133,30 @@ class _Fd2Capture:
             _flush_stderr()
             fd = cls._file.fileno()
             end = os.lseek(fd, 0, os.SEEK_END)
-            self.text = os.pread(fd, end - self._start, self._start).decode("utf-8", "replace").strip()
+            lead = f"{self.name}: ".encode()
+            lines = os.pread(fd, end - self._start, self._start).splitlines(keepends=True)
+            self.text = b"".join(ln for ln in lines if ln.startswith(lead)).decode("utf-8", "replace").strip()
             cls._users -= 1
             if cls._users == 0:
+                leads = tuple(f"{n}: ".encode() for n in cls._names)
+                rest = [ln for ln in os.pread(fd, end, 0).splitlines(keepends=True) if not ln.startswith(leads)]
+                with contextlib.suppress(OSError):
+                    _write_all(cls._saved, b"".join(rest))
                 os.dup2(cls._saved, 2)
                 os.close(cls._saved)
                 cls._file.close()
                 cls._saved = cls._file = None
+                cls._names = set()
 
     def message(self) -> str:
         """The captured text as one short line."""
         return " ".join(self.text.split())[:_MAX_LOG_CHARS]
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    view = memoryview(data)
+    while view:
+        view = view[os.write(fd, view):]
 
 
 def _flush_stderr() -> None:
@@ -770,13 +792,14 @@ def _decode_pixels(path: Path, meta: CameraMeta, h: int, w: int) -> np.ndarray:
 
     LibRaw refuses images whose active area is under 22 px a side; tiny uncompressed files (test
     fixtures) are then read by :func:`_read_uncompressed`. Anything LibRaw writes to stderr while
-    decoding means corrupt data (its ``derror`` callback), so it is an error even if it returned pixels.
+    decoding about this file (a line led by its name: LibRaw's data callback) means corrupt data, so it
+    is an error even if it returned pixels; other threads' output meanwhile goes on to stderr.
     """
     import rawpy
 
     _quiet_rawpy_fork_warning()
     unsupported, error = False, None
-    with _Fd2Capture() as cap:
+    with _Fd2Capture(str(path)) as cap:
         try:
             with rawpy.imread(str(path)) as raw:
                 data = np.array(raw.raw_image, dtype=np.float32, copy=True)  # copy inside the with block

@@ -305,6 +305,51 @@ def test_libraw_stderr_after_a_successful_decode_is_an_error(monkeypatch, make_p
     assert capfd.readouterr().err == ""
 
 
+def test_other_output_on_stderr_during_a_decode_is_passed_on(monkeypatch, make_plain, capfd):
+    """What another thread writes to fd 2 while LibRaw decodes (a warning, an error line) is not LibRaw's
+    report about this file: the file reads, and the text reaches stderr once, whole."""
+    import threading
+
+    import rawpy
+
+    real = rawpy.imread
+    started, written = threading.Event(), threading.Event()
+
+    def slow_imread(path):
+        started.set()
+        written.wait(5)
+        return real(path)
+
+    def other_thread():
+        started.wait(5)
+        os.write(2, b"simcam render: warning: something else\nno newline")
+        written.set()
+
+    monkeypatch.setattr(rawpy, "imread", slow_imread)
+    t = threading.Thread(target=other_thread)
+    t.start()
+    frame = simcam.read(make_plain)
+    t.join()
+    assert frame.data.size > 0
+    assert capfd.readouterr().err == "simcam render: warning: something else\nno newline"
+
+
+def test_a_report_about_this_file_among_other_output(monkeypatch, make_plain, capfd):
+    import rawpy
+
+    real = rawpy.imread
+
+    def noisy_imread(path):
+        os.write(2, f"other.dng: data corrupted at 1\n{path}: data corrupted at 1234\nsomething else\n".encode())
+        return real(path)
+
+    monkeypatch.setattr(rawpy, "imread", noisy_imread)
+    with pytest.raises(DngError) as exc:
+        simcam.read(make_plain)
+    assert "data corrupted at 1234" in str(exc.value) and "other.dng" not in str(exc.value)
+    assert capfd.readouterr().err == "other.dng: data corrupted at 1\nsomething else\n"
+
+
 @pytest.fixture
 def make_plain(seed_dir, tmp_path) -> Path:
     path = tmp_path / "plain.dng"
