@@ -27,19 +27,16 @@ Per ISO group of a capture set:
    :mod:`simcam.calibration.heldout`, or its per-plane one-pixel family, beyond ``kl_tolerance`` and
    twice their sampling SD), and it breaks no diagnostic the current model reproduces on the held-out
    frames (:meth:`Loop._broken`). A refused or refuted candidate is passed over for the best of the
-   others. The other candidates that beat the current model beyond their noise are tried again in the
-   next iteration on top of the one added (forward selection), refitted from their diagnostics under
-   the new model, while one of those diagnostics still has p < :data:`CARRY_P` (not adjusted for the
-   battery: it leans the candidate's way, short of the family-wise level). The structured KL, the
-   pooled one-pixel marginal KL (Noise Flow binning, Jeffreys-smoothed model histogram) and the
-   NLL/dim of the model's Gaussian marginal are reported before and after, with every candidate's score.
+   others. The structured KL, the pooled one-pixel marginal KL (Noise Flow binning, Jeffreys-smoothed
+   model histogram) and the NLL/dim of the model's Gaussian marginal are reported before and after,
+   with every candidate's score.
    Candidates whose gains differ by less than twice their combined standard errors cannot be told
    apart by the held-out frames; of those, one the sensor's previous ISO groups added is taken (a hot
    pixel saturated at a high ISO reads as a stuck one there), else the one the strongest residual
    proposed (:meth:`Loop._break_tie`).
    When no candidate beats the current model, the proposing diagnostics are ``unexplained`` with the
-   candidates' scores as the reason, and the loop stops (also when nothing significant is left and
-   no candidate is carried over, or after ``max_iterations``).
+   candidates' scores as the reason, and the loop stops (also when nothing significant is left, or
+   after ``max_iterations``).
 
 Cost. Every replicate (a simulated capture reduced to its statistics) is drawn from its own stream,
 ``(seed, iso, purpose, ..., r)``, and replicates run on ``threads`` threads (numpy and the noise
@@ -60,7 +57,7 @@ import numpy as np
 
 from ..errors import DatasetError
 from . import diagnostics as dg
-from .attribution import GAIN_Z, MIN_GAIN, compare
+from .attribution import MIN_GAIN, compare
 from .binning import hist_uniform
 from .capture import CaptureSet, Sequence
 from .effects import FitContext, card_for, effect_for, excluded_by
@@ -299,9 +296,6 @@ UNCERTAIN_Z = 1.5
 #: a diagnostic the current model reproduces with a held-out p-value at least this can refute a candidate
 #: that fails it (:meth:`Loop._broken`)
 REFUTE_PASS_P = 0.1
-#: a candidate that beat the model beside the one added is tried again on top of it while one of its
-#: diagnostics has p below this under the new model (forward selection, Loop.run)
-CARRY_P = 0.05
 
 
 #: environment variable that sets the loop's default thread count (e.g. 1 where processes already share the cores)
@@ -726,11 +720,9 @@ class Loop:
             excluded.add(d.name)
             res.unexplained.append({"diagnostic": d.name, "discrepancy": d.z, "reason": reason})
 
-        carried: dict[str, list] = {}  # effects whose candidates beat the model before the last addition
-
         for _it in range(cfg.max_iterations):
             sig = sorted((d for d in discs if d.significant and d.name not in excluded), key=strength, reverse=True)
-            if not sig and not carried:
+            if not sig:
                 break
             proposals: dict[str, list] = {}  # effect -> the significant diagnostics proposing it, strongest first
             for d in sig:
@@ -752,17 +744,6 @@ class Loop:
                                    "in the model")
                 else:
                     proposals.setdefault(effect, []).append(d)
-            # forward selection: a candidate that beat the previous model beside the one added is tried again
-            # on top of it (refitted from its diagnostics under the new model) while one of its diagnostics
-            # still leans its way (p < CARRY_P, not adjusted for the battery): a few strong hot pixels beside
-            # dark current (5 of 24,576 pixels at ~180 DN) are a held-out gain of 8 +- 0.6 nats, yet dark
-            # current's log-normal tail leaves their count at p 0.004, short of the family-wise level
-            now = {d.name: d for d in discs}
-            again = {effect: [now.get(d.name, d) for d in ds] for effect, ds in carried.items()
-                     if effect not in proposals and effect not in model.effects and not excluded_by(effect, model.effects)
-                     and any(d.name in now and now[d.name].p < CARRY_P for d in ds)}
-            proposals.update(again)
-            carried = {}
             if not proposals:
                 continue
             tag += 1
@@ -782,12 +763,10 @@ class Loop:
                 best = self._break_tie(best, scored, sig)
             for rec, _c, _h in tried:
                 rec["chosen"] = best is not None and rec is best[0]
-                if rec["effect"] in again:
-                    rec["carried_over"] = "beat the model before the last addition on the held-out frames; tried on top of it"
             if best is None:  # no candidate could be fitted: each proposing diagnostic says why
                 for rec, _c, _h in tried:
-                    for d in proposals[rec["effect"]]:
-                        unexplained(d, rec["skipped"])
+                    for name in rec["proposed_by"]:
+                        unexplained(next(d for d in sig if d.name == name), rec["skipped"])
                 continue
             brec, cand, held = best
             effect = brec["effect"]
@@ -825,10 +804,6 @@ class Loop:
             res.iterations.append(rec)
             if accepted:
                 model, discs, held_cur = cand, new_discs, held
-                carried = {r["effect"]: proposals[r["effect"]] for r, _c, _h in tried
-                           if r["effect"] != effect and r.get("heldout_gain") is not None
-                           and r["heldout_gain"] > MIN_GAIN and r["heldout_gain"] > GAIN_Z * r["heldout_gain_sd"]
-                           and r.get("kl_ok", True) and not r.get("breaks")}
                 continue
             # no candidate beats the current model: every proposing diagnostic stays unexplained
             listed = "; ".join(
