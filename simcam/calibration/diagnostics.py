@@ -186,6 +186,18 @@ class CaptureData:
     cache: dict = field(default_factory=dict)
     dark_series: list | None = None
 
+    def cached(self, key, compute):
+        """``compute()`` once per capture under ``key``; a :class:`NotApplicable` it raised is kept too
+        and raised again on each call."""
+        if key not in self.cache:
+            try:
+                self.cache[key] = compute()
+            except NotApplicable as exc:
+                self.cache[key] = exc
+        if isinstance(self.cache[key], NotApplicable):
+            raise self.cache[key]
+        return self.cache[key]
+
     def profile_free_dark_variance(self) -> float:
         """:func:`profile_free_temporal_variance` of the darks (cached)."""
         if "pf_var" not in self.cache:
@@ -989,14 +1001,7 @@ def telegraph_split(d: CaptureData) -> tuple[np.ndarray, np.ndarray, np.ndarray,
     pixel near a code edge then sits on two codes a step apart, many read-noise sigmas, and how many do
     depends on where the edges lie (a differential non-linearity moves them), not on traps. Computed once
     per capture, a :class:`NotApplicable` too (it is raised again on each call)."""
-    if "telegraph" not in d.cache:
-        try:
-            d.cache["telegraph"] = _telegraph(d)
-        except NotApplicable as exc:
-            d.cache["telegraph"] = exc
-    if isinstance(d.cache["telegraph"], NotApplicable):
-        raise d.cache["telegraph"]
-    return d.cache["telegraph"]
+    return d.cached("telegraph", lambda: _telegraph(d))
 
 
 def _telegraph(d: CaptureData):
@@ -1087,16 +1092,11 @@ def fixed_cov_blocks(d: CaptureData, which) -> list[tuple[np.ndarray, np.ndarray
     """:func:`_fixed_cov_blocks` (:data:`FIXED_COV_BLOCKS` bands) of the darks pooled (``which="darks"``)
     or of flat ``which`` (its index in ``d.flats``), computed once per capture (the PRNU statistics
     share it); None with fewer than 2 frames. A :class:`NotApplicable` is raised again on each call."""
-    key = ("fixed_cov", which)
-    if key not in d.cache:
+    def compute():
         frames = np.concatenate(d.darks) if which == "darks" else d.flats[which]
-        try:
-            d.cache[key] = _fixed_cov_blocks(frames, FIXED_COV_BLOCKS) if frames.shape[0] >= 2 else None
-        except NotApplicable as exc:
-            d.cache[key] = exc
-    if isinstance(d.cache[key], NotApplicable):
-        raise d.cache[key]
-    return d.cache[key]
+        return _fixed_cov_blocks(frames, FIXED_COV_BLOCKS) if frames.shape[0] >= 2 else None
+
+    return d.cached(("fixed_cov", which), compute)
 
 
 def _cov_of_blocks(blocks: list[tuple[np.ndarray, np.ndarray]]) -> list[float]:
