@@ -102,11 +102,12 @@ def normalize_rows(frame: RawFrame, *, black_level: float | None = None, white_l
     """:func:`normalize` as a map of rows, ``fn(src, dst, r0)`` (rows ``r0 ..`` of the mosaic into float32
     ``dst``, which may be ``src``), when the black level is one per-site cell and there is no
     linearization table; None otherwise. Raises the errors of :func:`normalize`."""
-    meta = frame.meta
-    if meta.linearization_table is not None or black_level is not None or np.ndim(frame.data) != 2:
+    meta, shape = frame.meta, np.shape(frame.data)
+    if (meta.linearization_table is not None or black_level is not None or len(shape) != 2
+            or black_level_cell(meta, shape) is None):  # (not the H x W black map only to drop it)
         return None
-    _, cell, scale = _levels(frame, np.shape(frame.data), None, white_level)
-    return None if cell is None else _cell_rows(cell, scale, np.shape(frame.data)[1])
+    _, cell, scale = _levels(frame, shape, None, white_level)
+    return _cell_rows(cell, scale, shape[1])
 
 
 def _cell_rows(cell: np.ndarray, scale: np.ndarray, w: int):

@@ -33,7 +33,7 @@ def run_stages(stages, frame: RawFrame, rngs, progress=None) -> RawFrame:
     k, n = 0, len(stages)
     while k < n:
         ops, out, result, j = [], None, frame, k
-        while j < n and not stages[j].random:
+        while j < n and not stages[j].random:  # the run of row-wise stages from k: planned, not computed
             stages[j].check_input(result)
             op = stages[j].row_op(result)
             if op is None:
@@ -47,9 +47,9 @@ def run_stages(stages, frame: RawFrame, rngs, progress=None) -> RawFrame:
             _run_rows(ops, np.asarray(frame.data), out)
             if not any(out is b for b in owned):
                 owned.append(out)
-        else:
-            result = stages[k](frame, rngs[k] if rngs else None)
-            j = k + 1
+        if j < n:  # the stage that ended the run (random, or not a map of rows) on its own
+            result = stages[j](result, rngs[j] if rngs else None)
+            j += 1
         if progress is not None:
             for st in stages[k:j]:
                 progress(st.type)

@@ -192,16 +192,19 @@ class WhiteBalance(Stage, type="white_balance", accepts=frozenset({"raw", "camer
         gains = self.gains_for(frame)
         if gains is None:
             return frame.evolve(step=self.type)
-        meta = frame.meta.copy()
-        prev = meta.white_balance_gains
-        meta.white_balance_gains = gains if prev is None else np.asarray(prev, dtype=np.float64) * gains
-        return frame.evolve(apply_gains(frame, gains), meta=meta, step=self.type)
+        return frame.evolve(apply_gains(frame, gains), meta=_recorded(frame.meta, gains), step=self.type)
 
     def row_op(self, frame: RawFrame) -> RowOp | None:
         if self.effective_source in ("none", "grey_world", "white_patch", "spot") or np.ndim(frame.data) != 2:
             return None  # no change, or gains estimated from the pixels
         gains = self.gains_for(frame)
-        meta = frame.meta.copy()
-        prev = meta.white_balance_gains
-        meta.white_balance_gains = gains if prev is None else np.asarray(prev, dtype=np.float64) * gains
+        meta = _recorded(frame.meta, gains)
         return RowOp(mosaic_gain_rows(frame, gains), lambda f, data: f.evolve(data, meta=meta, step=self.type))
+
+
+def _recorded(meta, gains: np.ndarray):
+    """A copy of ``meta`` whose ``white_balance_gains`` include ``gains`` (multiplied into earlier ones)."""
+    meta = meta.copy()
+    prev = meta.white_balance_gains
+    meta.white_balance_gains = gains if prev is None else np.asarray(prev, dtype=np.float64) * gains
+    return meta
