@@ -289,17 +289,22 @@ def test_libraw_stderr_is_captured_into_the_error(monkeypatch, make_plain, capfd
     assert capfd.readouterr().err == ""
 
 
-def test_libraw_stderr_after_a_successful_decode_is_an_error(monkeypatch, make_plain, capfd):
-    """LibRaw's data callback prints "data corrupted" and goes on: never silent wrong pixels."""
+def _noisy_imread(monkeypatch, text):
+    """rawpy.imread that writes ``text(path)`` to fd 2 (as LibRaw's C callbacks do), then decodes."""
     import rawpy
 
     real = rawpy.imread
 
     def noisy_imread(path):
-        os.write(2, f"{path}: data corrupted at 1234\n".encode())
+        os.write(2, text(path).encode())
         return real(path)
 
     monkeypatch.setattr(rawpy, "imread", noisy_imread)
+
+
+def test_libraw_stderr_after_a_successful_decode_is_an_error(monkeypatch, make_plain, capfd):
+    """LibRaw's data callback prints "data corrupted" and goes on: never silent wrong pixels."""
+    _noisy_imread(monkeypatch, lambda path: f"{path}: data corrupted at 1234\n")
     with pytest.raises(DngError, match="data corrupted at 1234"):
         simcam.read(make_plain)
     assert capfd.readouterr().err == ""
@@ -335,15 +340,7 @@ def test_other_output_on_stderr_during_a_decode_is_passed_on(monkeypatch, make_p
 
 
 def test_a_report_about_this_file_among_other_output(monkeypatch, make_plain, capfd):
-    import rawpy
-
-    real = rawpy.imread
-
-    def noisy_imread(path):
-        os.write(2, f"other.dng: data corrupted at 1\n{path}: data corrupted at 1234\nsomething else\n".encode())
-        return real(path)
-
-    monkeypatch.setattr(rawpy, "imread", noisy_imread)
+    _noisy_imread(monkeypatch, lambda path: f"other.dng: data corrupted at 1\n{path}: data corrupted at 1234\nsomething else\n")
     with pytest.raises(DngError) as exc:
         simcam.read(make_plain)
     assert "data corrupted at 1234" in str(exc.value) and "other.dng" not in str(exc.value)
