@@ -91,8 +91,8 @@ class _Fd2Capture:
 
     LibRaw reports corrupt data from C, below Python's ``sys.stderr``, through its data callback:
     ``fprintf(stderr, "%s: Unexpected end of file", fname)`` and ``"%s: data corrupted at %d"`` (LibRaw
-    0.21, ``default_data_callback``; its memory callback likewise), always led by the file name it was given. :attr:`text`
-    holds the lines led by ``name`` written during this capture. Overlapping captures (threads) share
+    0.21, ``default_data_callback``; its memory callback likewise), always led by the file name it was
+    given. :attr:`text` holds the lines led by ``name`` written during this capture. Overlapping captures (threads) share
     one redirection; whatever else reached fd 2 meanwhile (another thread's output: a warning, an
     error line, ``-X importtime``) is not this file's report and is written to the real stderr when
     the redirection ends.
