@@ -87,6 +87,11 @@ class LoopModel:
         """The ADC's step (DN): the ``quantization`` effect's, else 1."""
         return float(self.param("quantization", "step_dn", 1.0))
 
+    def codes(self, dn):
+        """``dn`` on the model's ADC codes, ``round(dn / q) * q`` (DN; not clipped to [0, white])."""
+        q = self.q
+        return np.round(np.asarray(dn, np.float64) / q) * q
+
     def other_dark_variance(self, start: float) -> float:
         """``start`` plus the temporal dark variance (DN^2) the model's effects add besides the read
         noise (:meth:`EffectCard.dark_variance_dn2`), summed in signal-chain order."""

@@ -66,7 +66,6 @@ def simulate_capture(model: LoopModel, specs: list[SimSpec], rng) -> list[np.nda
     bare = None
     fs = model.full_scale_dn
     black = float(np.mean(model.black_dn))
-    q = model.q
     out = []
     for sp in specs:
         m = comp
@@ -80,5 +79,5 @@ def simulate_capture(model: LoopModel, specs: list[SimSpec], rng) -> list[np.nda
         x *= fs
         x += black
         # the composite ends with its quantization: snap the float32 round trip back onto the ADC codes
-        out.append(np.clip(np.round(x / q) * q, 0, model.white_dn).astype(np.float32))
+        out.append(np.clip(model.codes(x), 0, model.white_dn).astype(np.float32))
     return out

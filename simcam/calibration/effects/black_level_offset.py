@@ -9,7 +9,7 @@ model; A. Abdelhamed, *Noise Modelling for Smartphone Cameras*, PhD dissertation
 Fit. ``black_offset``: per 2x2 site, the median of the dark temporal-mean map minus the declared
 black level. With an ADC coarser than 1 DN in the model (``quantization``: codes ``q`` DN apart) the
 darks tell the dark level only to a code: the offset is measured from the code the declared black
-reads as (``round(black / q) * q``, the model's quantiser), so darks that sit on that code have no
+reads as (``LoopModel.codes``, the model's quantiser), so darks that sit on that code have no
 offset (a 0.6-DN read noise under 14-DN codes puts every dark value of a 256-DN black on code 252: not
 a black level 4 DN low).
 
@@ -34,8 +34,7 @@ class BlackLevelOffsetCard(DeclaredProfileCard, name="black_level_offset", param
                            null_field="offset_dn"):
     def fit(self, d, model, ctx):
         m = d.dark_map()[0]
-        q = model.q
         black = np.asarray(d.black_dn, np.float64)
-        ref = np.round(black / q) * q if q > 1.0 else black
+        ref = model.codes(black) if model.q > 1.0 else black
         return BlackLevelOffset(offset_dn=[float(np.median(m[dy::2, dx::2]) - ref[dy, dx])
                                            for dy, dx in dg.PLANE_OFFSETS])
