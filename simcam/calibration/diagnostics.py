@@ -297,6 +297,14 @@ class CaptureData:
             self.cache["ptc"] = ([mv(d) for d in self.darks], [mv(f) for f in self.flats])
         return self.cache["ptc"]
 
+    def ptc_dof(self) -> tuple[np.ndarray, np.ndarray]:
+        """Degrees of freedom of each dark's and flat's per-plane temporal variance in :meth:`ptc_points`:
+        (frames - 1) per pixel of a plane, the plane's pixels pooled."""
+        def dof(seqs):
+            return np.array([(s.shape[0] - 1) * ((s.shape[1] + 1) // 2) * ((s.shape[2] + 1) // 2) for s in seqs],
+                            dtype=np.float64)
+        return dof(self.darks), dof(self.flats)
+
 
 def plane_medians(m: np.ndarray) -> np.ndarray:
     """Each 2x2-site plane's median, as a map of ``m``'s shape (``m``'s float dtype, else float64)."""
@@ -424,6 +432,13 @@ def ptc_curvature(d: CaptureData):
 
 
 def plane_slopes(d: CaptureData) -> np.ndarray | None:
+    """Per CFA plane, the photon-transfer slope (temporal variance against mean, DN) of the flats.
+
+    With darks: the weighted least-squares line through the dark point, each flat weighted by the inverse of
+    its variance estimate's sampling variance, ``2 V^2 / dof`` (its own and the dark point's; V from the
+    unweighted line): a flat's variance has the same *relative* error at every level, so an unweighted fit
+    would take its slope from the brightest flat alone. Without darks: the unweighted line through the
+    flats."""
     darks, flats = d.ptc_points()
     if len(flats) < 1:
         return None
@@ -432,7 +447,13 @@ def plane_slopes(d: CaptureData) -> np.ndarray | None:
         v0 = np.mean([p[:, 1] for p in darks], axis=0)
         X = np.array([f[:, 0] for f in flats]) - mu0
         Y = np.array([f[:, 1] for f in flats]) - v0
-        return (X * Y).sum(0) / (X * X).sum(0)
+        k = (X * Y).sum(0) / (X * X).sum(0)
+        # the weights from the line's variances, not the measured ones (which would favour the flats whose
+        # variance came out low and bias the slope down)
+        dof_darks, dof_flats = d.ptc_dof()
+        v = np.maximum(v0 + k * X, 1e-12)
+        w = 1.0 / (v ** 2 / np.maximum(dof_flats, 1.0)[:, None] + v0 ** 2 / max(float(np.sum(dof_darks)), 1.0))
+        return (w * X * Y).sum(0) / (w * X * X).sum(0)
     if len(flats) < 2:
         return None
     return np.array([np.polyfit([f[c, 0] for f in flats], [f[c, 1] for f in flats], 1)[0] for c in range(4)])

@@ -30,6 +30,9 @@ class PTC:
     def ptc_points(self):
         return self._p
 
+    def ptc_dof(self):  # every point from 16 frames of 64x64 per plane
+        return tuple(np.full(len(points), 15.0 * 64 * 64) for points in self._p)
+
     flat_levels = dg.CaptureData.flat_levels  # (reads ptc_points only)
 
 
