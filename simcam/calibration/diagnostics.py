@@ -1775,13 +1775,18 @@ UPPER_TAIL = frozenset({"dark_checker_jitter"})
 #: statistics that are shares of pixels (a count over the number of pixels, :func:`resolution` being one
 #: pixel): where the replicates count few pixels, tested as counts (:func:`count_law`)
 COUNT_SHARES = frozenset({"defect_pixels", "telegraph_pixels", "hot_pixel_tail"})
+#: statistics that are one minus a share (:func:`resolution` being one unit of it): the count is of what the
+#: share leaves out (``code_occupancy``: the codes of the span no value uses)
+COUNT_COMPLEMENTS = frozenset({"code_occupancy"})
 #: the replicates' mean count below which a count statistic takes the count law (above it, the t law on
 #: the replicates' own spread, which also covers over-dispersion)
 COUNT_LAW_MAX_MEAN = 3.0
 
 
 def count_law(name: str, sims: np.ndarray, unit: float, null: float | None = None):
-    """The predictive law of a new count for a :data:`COUNT_SHARES` statistic, or None (use the t law).
+    """The predictive law of a new count for a :data:`COUNT_SHARES` or :data:`COUNT_COMPLEMENTS` statistic
+    (of those, the count of what the share leaves out: a 5-DN ADC's darks on 2 codes of a 6-code span leave 4
+    empty where a 1-DN model's replicates leave none), or None (use the t law).
 
     The replicates' counts (``sims / unit``) are taken as Poisson with rate lambda; with Jeffreys' prior
     the posterior of lambda is Gamma(S + 1/2, rate R) (S their sum over R replicates), and a new count
@@ -1797,8 +1802,10 @@ def count_law(name: str, sims: np.ndarray, unit: float, null: float | None = Non
     new count is Poisson with the bound as its mean (a few replicates cannot bound a rate the physics puts
     at 1e-10); a larger bound says nothing the replicates do not (constant or quantisation-dominated frames).
     """
-    if name not in COUNT_SHARES or not unit > 0 or sims.size < 2:
+    if name not in COUNT_SHARES | COUNT_COMPLEMENTS or not unit > 0 or sims.size < 2:
         return None
+    if name in COUNT_COMPLEMENTS:
+        sims = 1.0 - np.asarray(sims, dtype=np.float64)
     c = np.round(np.asarray(sims, dtype=np.float64) / unit)
     if null is not None and not c.any() and null < 0.5 / c.size:
         return sst.poisson(max(float(null), COUNT_NULL_MIN))
@@ -1820,7 +1827,7 @@ def discrepancy(name: str, value: float, sims: list[float], floor: float, null: 
     sd = max(float(s.std(ddof=1)), floor)
     law = count_law(name, s, floor, null)
     if law is not None:
-        p = count_p_value(int(round(value / floor)), law)
+        p = count_p_value(int(round((1.0 - value if name in COUNT_COMPLEMENTS else value) / floor)), law)
         diff = value - float(s.mean())
         z = float(np.sign(diff) * sst.t.isf(p / 2, R - 1)) if p < 1 else 0.0
         return Discrepancy(name, float(value), float(s.mean()), sd, z, p)
