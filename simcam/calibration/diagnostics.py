@@ -1778,6 +1778,13 @@ COUNT_SHARES = frozenset({"defect_pixels", "telegraph_pixels", "hot_pixel_tail"}
 #: statistics that are one minus a share (:func:`resolution` being one unit of it): the count is of what the
 #: share leaves out (``code_occupancy``: the codes of the span no value uses)
 COUNT_COMPLEMENTS = frozenset({"code_occupancy"})
+
+
+def _counted(name: str, share):
+    """The share a count statistic's count is of: the statistic, or one minus it (:data:`COUNT_COMPLEMENTS`)."""
+    return 1.0 - share if name in COUNT_COMPLEMENTS else share
+
+
 #: the replicates' mean count below which a count statistic takes the count law (above it, the t law on
 #: the replicates' own spread, which also covers over-dispersion)
 COUNT_LAW_MAX_MEAN = 3.0
@@ -1804,9 +1811,7 @@ def count_law(name: str, sims: np.ndarray, unit: float, null: float | None = Non
     """
     if name not in COUNT_SHARES | COUNT_COMPLEMENTS or not unit > 0 or sims.size < 2:
         return None
-    if name in COUNT_COMPLEMENTS:
-        sims = 1.0 - np.asarray(sims, dtype=np.float64)
-    c = np.round(np.asarray(sims, dtype=np.float64) / unit)
+    c = np.round(_counted(name, np.asarray(sims, dtype=np.float64)) / unit)
     if null is not None and not c.any() and null < 0.5 / c.size:
         return sst.poisson(max(float(null), COUNT_NULL_MIN))
     if c.mean() >= COUNT_LAW_MAX_MEAN or c.var(ddof=1) > max(c.mean(), 0.0):
@@ -1827,7 +1832,7 @@ def discrepancy(name: str, value: float, sims: list[float], floor: float, null: 
     sd = max(float(s.std(ddof=1)), floor)
     law = count_law(name, s, floor, null)
     if law is not None:
-        p = count_p_value(int(round((1.0 - value if name in COUNT_COMPLEMENTS else value) / floor)), law)
+        p = count_p_value(int(round(_counted(name, value) / floor)), law)
         diff = value - float(s.mean())
         z = float(np.sign(diff) * sst.t.isf(p / 2, R - 1)) if p < 1 else 0.0
         return Discrepancy(name, float(value), float(s.mean()), sd, z, p)

@@ -765,8 +765,8 @@ class Loop:
                 rec["chosen"] = best is not None and rec is best[0]
             if best is None:  # no candidate could be fitted: each proposing diagnostic says why
                 for rec, _c, _h in tried:
-                    for name in rec["proposed_by"]:
-                        unexplained(next(d for d in sig if d.name == name), rec["skipped"])
+                    for d in proposals[rec["effect"]]:
+                        unexplained(d, rec["skipped"])
                 continue
             brec, cand, held = best
             effect = brec["effect"]
