@@ -31,6 +31,8 @@ col_fpn_excess          column_fpn          cov(column means of even- and odd-fr
 col_fpn_spectrum_peak   empirical_lines     max / median of the periodogram of the mean of those two
                                             column profiles (a periodic fixed column pattern), as the
                                             normal quantile of its tail under white noise
+flat_col_spectrum_peak  empirical_lines     the same of the flats' even/odd-frame column profiles less
+                                            the darks', per unit of signal (a periodic column gain)
 dsnu_excess             dsnu                5-sigma-clipped var of the dark mean map (rows/cols removed) /
                                             (temporal var with rows/cols removed / n)
 hot_pixel_tail          hot_pixels          fraction of pixels whose dark temporal median is
@@ -98,10 +100,12 @@ PLANE_OFFSETS = ((0, 0), (0, 1), (1, 0), (1, 1))
 #: The battery, in report order. The effect each one proposes is on the effect's card
 #: (``EffectCard.diagnostics``, :mod:`simcam.calibration.effects`); a diagnostic no card claims
 #: (``dark_checker_jitter``) proposes none; ``col_temporal_excess``, ``frame_mean_drift``, ``dark_frame_jitter``,
-#: ``col_fpn_spectrum_peak``, ``row_mean_lag1`` and ``flat_spread_growth`` propose empirical components.
+#: ``col_fpn_spectrum_peak``, ``flat_col_spectrum_peak``, ``row_mean_lag1`` and ``flat_spread_growth`` propose
+#: empirical components.
 DIAGNOSTICS = (
     "ptc_curvature", "plane_gain_spread", "row_mean_excess", "row_spectrum_peak", "col_spectrum_peak",
-    "col_temporal_excess", "row_mean_lag1", "dark_checker_jitter", "col_fpn_excess", "col_fpn_spectrum_peak", "dsnu_excess",
+    "col_temporal_excess", "row_mean_lag1", "dark_checker_jitter", "col_fpn_excess", "col_fpn_spectrum_peak",
+    "flat_col_spectrum_peak", "dsnu_excess",
     "hot_pixel_tail", "prnu_excess", "flat_spread_growth",
     "black_offset", "dark_signal_slope", "dark_variance_slope", "frame_mean_jitter", "frame_mean_drift",
     "dark_frame_jitter", "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "lag1_corr",
@@ -134,6 +138,7 @@ NEEDS = {
     "dark_checker_jitter": "needs a dark sequence",
     "col_fpn_excess": "needs a dark or flat sequence",
     "col_fpn_spectrum_peak": "needs a dark or flat sequence",
+    "flat_col_spectrum_peak": "needs a dark sequence and a flat sequence of >= 2 frames",
     "dsnu_excess": "needs a dark sequence",
     "hot_pixel_tail": "needs a dark sequence",
     "prnu_excess": "needs a flat sequence",
@@ -753,10 +758,25 @@ def frame_spectrum_peak(d: CaptureData):
     return float(-ndtri_exp(log_p))
 
 
+def _parity_centred(profile: np.ndarray) -> np.ndarray:
+    """A column profile less the mean of its even and of its odd columns. The planes' centring takes each
+    plane's *median* off the mean map; on quantised darks (a 4-frame mean map on quarter codes) that
+    median jumps by a step between two sets of frames, and the jump is a +-step/2 alternation of the
+    columns, the same in all of a half's rows: it would count as a fixed column pattern (the even/odd
+    covariance of one sensor's darks spread over +-2 of the white level from one choice of frames to
+    another, against 0.07 in the model's replicates). A column-parity offset is the CFA sites' black
+    level, not a column pattern."""
+    out = profile.copy()
+    out[0::2] -= out[0::2].mean()
+    out[1::2] -= out[1::2].mean()
+    return out
+
+
 def column_profiles(d: CaptureData):
     """Column profiles of the mean maps of the even and of the odd frames (darks, else the
-    longest flat): plane-centred, clipped at 5 robust sigma, row means removed. Their covariance
-    sees only the fixed column pattern (temporal column noise is independent between the halves)."""
+    longest flat): plane-centred, clipped at 5 robust sigma, row means removed, each column parity's
+    mean removed (:func:`_parity_centred`). Their covariance sees only the fixed column pattern
+    (temporal column noise is independent between the halves)."""
     if "colprof" not in d.cache:
         stacks = d.darks or ([max(d.flats, key=lambda a: (a.shape[0], float(a.mean())))] if d.flats else [])
         if not stacks:
@@ -767,7 +787,7 @@ def column_profiles(d: CaptureData):
             for half in (allf[0::2], allf[1::2]):
                 m = _clip_robust(plane_centre(half.mean(0)))
                 m = m - m.mean(axis=1, keepdims=True)
-                out.append((m.mean(axis=0), float(np.var(m)), m.shape[0]))
+                out.append((_parity_centred(m.mean(axis=0)), float(np.var(m)), m.shape[0]))
             d.cache["colprof"] = out
     return d.cache["colprof"]
 
@@ -802,6 +822,15 @@ def column_profile_spectrum(d: CaptureData) -> tuple[np.ndarray, np.ndarray, int
     return d.cache["colspec"]
 
 
+def _peak_quantile(p: np.ndarray, what: str) -> float:
+    """The largest of n periodogram bins over their median times log 2 as a normal quantile: for a white
+    pattern the bins are independent exponentials and the maximum exceeds x with probability
+    ``1 - (1 - exp(-x))^n``."""
+    x = _ratio(float(p.max()), float(np.median(p)), what) * math.log(2)
+    log_tail = math.log(p.size) - x if x > 30 else math.log(-math.expm1(p.size * math.log1p(-math.exp(-x))))
+    return float(-ndtri_exp(log_tail))
+
+
 def col_fpn_spectrum_peak(d: CaptureData):
     """The largest bin of the periodogram of the fixed column profile (bins 1 .. (W - 1) / 2) as a normal
     quantile: for a white column pattern (``column_fpn``'s independent offsets, DSNU averaged down the
@@ -819,9 +848,80 @@ def col_fpn_spectrum_peak(d: CaptureData):
     p = spec[0][: (spec[2] - 1) // 2]
     if p.size < 4:
         raise NotApplicable(f"a column profile of {spec[2]} columns has fewer than 4 frequencies")
-    x = _ratio(float(p.max()), float(np.median(p)), "the median of the column profile's periodogram") * math.log(2)
-    log_tail = math.log(p.size) - x if x > 30 else math.log(-math.expm1(p.size * math.log1p(-math.exp(-x))))
-    return float(-ndtri_exp(log_tail))
+    return _peak_quantile(p, "the median of the column profile's periodogram")
+
+
+@dataclass
+class GainLineSpectrum:
+    """Spectrum of the fixed column pattern of the flats relative to their signal, the darks' taken off
+    (:func:`flat_column_gain_spectrum`), bins 1 .. W/2: ``power`` the periodogram of the mean of the
+    even- and odd-frame relative profiles, ``share`` each bin's share of their covariance (as
+    :func:`column_profile_spectrum`'s), ``gain`` and ``offset`` the complex rfft coefficients of the
+    relative and of the darks' profile (the phase of a gain line against an offset line), ``width``."""
+
+    power: np.ndarray
+    share: np.ndarray
+    gain: np.ndarray
+    offset: np.ndarray
+    width: int
+
+
+def _profile_halves(stack: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Column profiles of the mean maps of a stack's even and odd frames, as :func:`column_profiles` makes
+    them (plane-centred, clipped at 5 robust sigma, row means removed, column parities centred)."""
+    out = []
+    for half in (stack[0::2], stack[1::2]):
+        m = _clip_robust(plane_centre(half.mean(0, dtype=np.float64)))
+        out.append(_parity_centred((m - m.mean(axis=1, keepdims=True)).mean(axis=0)))
+    return out[0], out[1]
+
+
+def flat_column_gain_spectrum(d: CaptureData) -> GainLineSpectrum | None:
+    """The flats' fixed column pattern per unit of signal: for every flat sequence of >= 2 frames, its
+    even- and odd-frame column profiles less the darks' (:func:`_profile_halves`) divided by its signal
+    S (DN above the darks), averaged over the flats with weights S (the relative profile's white noise,
+    shot noise over S^2, falls as 1/S). What is left is a column *gain* pattern (column amplifiers or
+    interleaved column ADCs with a gain mismatch: EMVA 1288 Release 4.0, sec. 8, the horizontal
+    spectrogram of the PRNU) plus PRNU and temporal noise averaged down the columns (white); an offset
+    pattern, the same in darks and flats, drops out."""
+    if "gainspec" not in d.cache:
+        flats = [f for f in d.flats if f.shape[0] >= 2]
+        if sum(x.shape[0] for x in d.darks) < 2 or not flats:
+            d.cache["gainspec"] = None
+            return None
+        (da, _, _), (db, _, _) = column_profiles(d)  # the darks' (there are darks)
+        level = sum(float(x.mean(dtype=np.float64)) * x.shape[0] for x in d.darks) / sum(x.shape[0] for x in d.darks)
+        lit = [(f, float(f.mean()) - level) for f in flats]
+        lit = [(f, s) for f, s in lit if s > 0]
+        if not lit:
+            d.cache["gainspec"] = None
+            return None
+        # sum_j S_j r_j / sum_j S_j with r_j = (f_j - d) / S_j: sum_j (f_j - d) / sum_j S_j
+        halves = [_profile_halves(f) for f, _s in lit]
+        norm = sum(s for _f, s in lit)
+        ra = sum(fa - da for fa, _fb in halves) / norm
+        rb = sum(fb - db for _fa, fb in halves) / norm
+        w = ra.size
+        a, b = np.fft.rfft(ra - ra.mean()), np.fft.rfft(rb - rb.mean())
+        share = 2.0 * np.real(a * np.conj(b)) / w ** 2
+        if w % 2 == 0:
+            share[-1] /= 2
+        off = np.fft.rfft((da + db) / 2 - (da + db).mean() / 2)
+        d.cache["gainspec"] = GainLineSpectrum(np.abs((a + b) / 2)[1:] ** 2, share[1:], ((a + b) / 2)[1:], off[1:], w)
+    return d.cache["gainspec"]
+
+
+def flat_col_spectrum_peak(d: CaptureData):
+    """:func:`col_fpn_spectrum_peak` of the flats' relative column pattern (:func:`flat_column_gain_spectrum`):
+    a periodic column *gain* pattern, which grows with the light and is absent from the darks, puts it
+    far out."""
+    spec = flat_column_gain_spectrum(d)
+    if spec is None:
+        return None
+    p = spec.power[: (spec.width - 1) // 2]
+    if p.size < 4:
+        raise NotApplicable(f"a column profile of {spec.width} columns has fewer than 4 frequencies")
+    return _peak_quantile(p, "the median of the flats' relative column periodogram")
 
 
 def dsnu_excess(d: CaptureData):

@@ -2,8 +2,12 @@
 
 Per ISO group of a capture set:
 
-1. Frames of each sequence are split in time: the first half fits, the second
-   half is held out (sequences of < 4 frames only fit).
+1. Frames of each sequence are split by parity: the even frames fit, the odd
+   frames are held out (sequences of < 4 frames only fit). The model is
+   stationary (it has no frame index), so the halves are interleaved: a level or
+   gain that drifts over a sequence spreads the frame means of both halves alike,
+   which a per-frame component can describe, where a split in time would put the
+   held-out half at another level than any fit half can reach.
 2. Base fit (:func:`simcam.calibration.fit.base_fit`).
 3. Every diagnostic of :mod:`simcam.calibration.diagnostics` is computed on the
    fit frames and on ``replicates`` captures simulated from the current model
@@ -168,9 +172,8 @@ class Group:
             f = s.frames if s.region_applied else region.extract(s.frames)
             clean = None if s.clean is None or s.region_applied else region.extract(s.clean)
             if s.n >= 4:
-                k = (s.n + 1) // 2
-                self.fit.append((s, f[:k], clean))
-                self.held.append((s, f[k:], clean))
+                self.fit.append((s, f[0::2], clean))
+                self.held.append((s, f[1::2], clean))
             else:
                 self.fit.append((s, f, clean))
         if not self.held:

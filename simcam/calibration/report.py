@@ -71,9 +71,10 @@ FAMILY_DIAGNOSTICS = {
     "pixel": ("dsnu_excess", "hot_pixel_tail", "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "prnu_excess",
               "flat_spread_growth", "ptc_curvature", "plane_gain_spread", "black_offset"),
     "row": ("row_mean_excess", "row_spectrum_peak", "row_mean_lag1"),
-    "column": ("col_temporal_excess", "col_fpn_excess", "col_fpn_spectrum_peak", "col_spectrum_peak"),
+    "column": ("col_temporal_excess", "col_fpn_excess", "col_fpn_spectrum_peak", "flat_col_spectrum_peak",
+               "col_spectrum_peak"),
     "temporal": ("dsnu_excess", "prnu_excess", "flat_spread_growth", "hot_pixel_tail", "col_fpn_excess",
-                 "col_fpn_spectrum_peak"),
+                 "col_fpn_spectrum_peak", "flat_col_spectrum_peak"),
     "block": ("lag1_corr", "lag2_corr", "dark_checker_jitter", "frame_spectrum_peak"),
     "frame": ("frame_mean_jitter", "frame_mean_drift", "dark_frame_jitter", "dark_checker_jitter"),
 }

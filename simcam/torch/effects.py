@@ -356,7 +356,10 @@ def empirical_gain(group: Group, x, ctx: Ctx, st: EffectState):
 
 
 def empirical_lines(group: Group, x, ctx: Ctx, st: EffectState):
-    return x + st.fixed("offset")
+    x = x + st.fixed("offset")
+    if any(m.has_gain for m in group.uniq):  # the lines' gain part acts on the expected signal (read-out stage)
+        x = x + st.fixed("gain") * st.signal
+    return x
 
 
 #: torch implementation of every effect type (the registry test checks this against simcam's effect registry).
@@ -419,7 +422,9 @@ def fixed_arrays(effect, fixed: dict[str, Any], shape: tuple[int, int]) -> dict[
     if t == "empirical_gain":
         return {"gain": _map3(fixed["gain"], shape)}
     if t == "empirical_lines":
-        return {"offset": _map3(fixed["offset"], shape)}
+        # a gain part always (zeros without one), so the samples of a group stack alike
+        offset = _map3(fixed["offset"], shape)
+        return {"offset": offset, "gain": _map3(fixed["gain"], shape) if "gain" in fixed else np.zeros_like(offset)}
     if t == "empirical_response":
         return {"strength": _map3(fixed["strength"], shape)}
     if effect.type == "column_fpn":

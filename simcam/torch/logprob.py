@@ -206,7 +206,8 @@ def _composite(group, y, clean, ctx):
             log_jac = log_jac + torch.log(torch.abs(1.0 - 2.0 * s * y))
         else:
             zero = torch.zeros(y.shape, dtype=torch.float32, device=y.device)
-            y = y - EFFECTS[e.type](eg[i], zero, c32, EffectState(_stacked(group, fixed, i))).double()
+            state = EffectState(_stacked(group, fixed, i), signal=signal.float())
+            y = y - EFFECTS[e.type](eg[i], zero, c32, state).double()
     return _base_logpdf(group.sub(lambda m: m.base), y, signal, ctx) - log_jac
 
 

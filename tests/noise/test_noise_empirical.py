@@ -122,3 +122,25 @@ def test_empirical_lines_keep_their_frequencies_and_power_with_a_phase_per_senso
     assert np.allclose(rows, rows[:, :1]) and np.ptp(rows[:, 0]) > 1e-3
     with pytest.raises(Exception, match="lines"):
         comp([{"type": "empirical_lines", "lines": [[0.7, 1e-3]]}])
+
+
+def test_empirical_lines_gain_part_grows_with_the_signal_at_its_phase():
+    """A line ``[f, a, g, delta]``: columns get ``a cos(phi_i) + S g cos(phi_i + delta)`` on a flat of
+    expected signal S, phi_i = 2 pi f i + phi; the phase drawn per sensor is the same for both parts."""
+    f, a, g, delta = 0.25, 2e-3, 0.02, 1.0
+    m = comp([{"type": "empirical_lines", "axis": "column", "lines": [[f, a, g, delta], [0.1, 0.0, 0.01, 0.0]]}])
+    dark = m.sample(np.zeros((4, 400), np.float32), COND, np.random.default_rng(0))[0].astype(np.float64)
+    s = 0.4
+    flat = m.sample(np.full((4, 400), s, np.float32), COND, np.random.default_rng(0))[0].astype(np.float64) - s
+    A, B = np.fft.rfft(dark), np.fft.rfft((flat - dark) / s)
+    k, k2 = round(f * 400), round(0.1 * 400)
+    assert abs(A[k]) * 2 / 400 == pytest.approx(a, rel=1e-3)  # offset amplitude
+    assert abs(B[k]) * 2 / 400 == pytest.approx(g, rel=1e-3)  # gain amplitude
+    assert np.angle(B[k] / A[k]) == pytest.approx(delta, abs=1e-3)  # the gain part's phase against the offset's
+    assert abs(A[k2]) < 1e-6 and abs(B[k2]) * 2 / 400 == pytest.approx(0.01, rel=1e-3)  # gain-only line
+    # an offset-only profile entry draws the same phases as before the gain part existed
+    x = comp([{"type": "empirical_lines", "axis": "column", "lines": [[f, a]]}]).sample(
+        np.zeros((4, 400), np.float32), COND, np.random.default_rng(0))[0].astype(np.float64)
+    assert np.angle(np.fft.rfft(x)[k]) == pytest.approx(np.angle(A[k]), abs=1e-6)
+    with pytest.raises(Exception, match="relative gain"):
+        comp([{"type": "empirical_lines", "lines": [[0.25, 1e-3, 0.7, 0.0]]}])

@@ -79,7 +79,10 @@ EFFECT_CASES = {
                           "quantiles": [-0.002, 0.0, 0.002], "rate": 0.003}],
     "empirical_gain": [{"type": "empirical_gain", "axis": "pixel", "quantiles": [0.9, 0.97, 1.0, 1.02, 1.1]}],
     "empirical_lines": [{"type": "empirical_lines", "axis": "column", "lines": [[0.25, 0.01], [0.1, 0.004]]},
-                        {"type": "empirical_lines", "axis": "row", "lines": [[0.125, 0.006]]}],
+                        {"type": "empirical_lines", "axis": "row", "lines": [[0.125, 0.006]]},
+                        # an offset and a gain part (a quarter of a cycle apart), and a gain-only line
+                        {"type": "empirical_lines", "axis": "column",
+                         "lines": [[0.25, 0.01, 0.02, 1.5708], [0.1, 0.0, 0.01, 0.0]]}],
     "empirical_spectrum": [{"type": "empirical_spectrum", "axis": "row", "frequencies": [0.01, 0.05, 0.2, 0.5],
                             "power": [4e-4, 1e-4, 2e-5, 1e-5]},
                            {"type": "empirical_spectrum", "axis": "column", "frequencies": [0.02, 0.5],

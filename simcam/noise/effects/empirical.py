@@ -15,8 +15,9 @@ probabilities).
   exposure time, without the shot noise of dark charge);
 * ``empirical_gain`` — a multiplicative fixed pattern of the expected signal (pixel, row,
   column): a measured PRNU-like map or gain distribution;
-* ``empirical_lines`` — a fixed additive pattern along rows or columns given by its measured
-  spectral lines (frequency, amplitude), phases drawn once per sensor;
+* ``empirical_lines`` — a fixed pattern along rows or columns given by its measured spectral lines
+  (frequency, amplitude of the offset, and optionally the relative amplitude and phase of a gain on
+  the expected signal), phases drawn once per sensor;
 * ``empirical_spectrum`` — a temporal additive offset along rows or columns whose sequence has a
   measured power spectrum (row offsets that wander from row to row: 1/f noise of the row reference),
   drawn every frame by spectral synthesis;
@@ -130,38 +131,62 @@ class EmpiricalGain(_MapOrQuantiles):
 
 @register_effect
 class EmpiricalLines(Effect):
-    """A measured fixed additive pattern along ``axis`` given by its spectral lines: line index ``i``
-    (the column for ``axis: column``) gets ``sum_j a_j cos(2 pi f_j i + phi_j)`` (normalised raw), the
-    phases ``phi_j`` uniform on [0, 2 pi) and drawn once per sensor. Each line adds ``a_j^2 / 2`` to the
-    variance of the line offsets and keeps its frequency whatever the frame's size (a Fourier
-    surrogate: measured amplitudes, random phases; J. Theiler et al., "Testing for nonlinearity in time
-    series: the method of surrogate data", Physica D 58, 1992)."""
+    """A measured fixed pattern along ``axis`` given by its spectral lines: line index ``i`` (the
+    column for ``axis: column``) gets the offset ``sum_j a_j cos(2 pi f_j i + phi_j)`` (normalised raw)
+    and, for a line given as ``[f, a, g, delta]``, the gain ``1 + sum_j g_j cos(2 pi f_j i + phi_j +
+    delta_j)`` on the expected signal: a pattern that grows with the light (column ADCs interleaved with
+    a gain mismatch as well as an offset mismatch; EMVA 1288 Release 4.0, sec. 8, the horizontal
+    spectrogram of the PRNU). The phases ``phi_j`` are uniform on [0, 2 pi) and drawn once per sensor;
+    ``delta_j`` keeps the measured phase of a line's gain part against its offset part. Each line adds
+    ``a_j^2 / 2`` to the variance of the line offsets and keeps its frequency whatever the frame's size
+    (a Fourier surrogate: measured amplitudes, random phases; J. Theiler et al., "Testing for
+    nonlinearity in time series: the method of surrogate data", Physica D 58, 1992)."""
 
     type: Literal["empirical_lines"] = "empirical_lines"
     axis: Literal["row", "column"] = "column"
-    lines: list[tuple[float, float]] = Field(min_length=1)
+    lines: list[tuple[float, float] | tuple[float, float, float, float]] = Field(min_length=1)
     stack_ok = True
     logprob_role = "offset"
 
     @model_validator(mode="after")
     def _lines(self):
-        for f, a in self.lines:
-            if not (0.0 <= f <= 0.5) or not a >= 0.0:
-                raise ValueError(f"lines: ({f}, {a}): expected (frequency in cycles per pixel in [0, 0.5], "
-                                 "amplitude >= 0)")
+        for line in self.lines:
+            f, a = line[0], line[1]
+            if not (0.0 <= f <= 0.5) or not a >= 0.0 or (len(line) == 4 and not 0.0 <= line[2] < 0.5):
+                raise ValueError(f"lines: {list(line)}: expected [frequency in cycles per pixel in [0, 0.5], "
+                                 "amplitude >= 0] or [frequency, amplitude, relative gain amplitude in [0, 0.5), "
+                                 "phase of the gain against the offset (radians)]")
         return self
+
+    @property
+    def has_gain(self) -> bool:
+        return any(len(line) == 4 and line[2] > 0 for line in self.lines)
 
     def fixed(self, shape, rng):
         n = shape[0] if self.axis == "row" else shape[1]
         i = np.arange(n, dtype=np.float64)
         out = np.zeros(n)
-        for f, a in self.lines:
-            out += a * np.cos(2 * np.pi * f * i + rng.uniform(0.0, 2 * np.pi))
+        gain = np.zeros(n)
+        for line in self.lines:
+            f, a = line[0], line[1]
+            phi = 2 * np.pi * f * i + rng.uniform(0.0, 2 * np.pi)
+            out += a * np.cos(phi)
+            if len(line) == 4:
+                gain += line[2] * np.cos(phi + line[3])
         out = out.astype(np.float32)
-        return {"offset": out[:, None] if self.axis == "row" else out[None, :]}
+        got = {"offset": out[:, None] if self.axis == "row" else out[None, :]}
+        if self.has_gain:
+            gain = gain.astype(np.float32)
+            got["gain"] = gain[:, None] if self.axis == "row" else gain[None, :]
+        return got
 
     def apply(self, x, ctx):
-        x += ctx.fixed["offset"][: x.shape[-2], : x.shape[-1]]
+        h, w = x.shape[-2], x.shape[-1]
+        x += ctx.fixed["offset"][:h, :w]
+        if "gain" in ctx.fixed:
+            if ctx.signal is None:
+                raise NoiseModelError("empirical_lines with a gain part needs the expected signal")
+            x += ctx.fixed["gain"][:h, :w] * ctx.signal
         return x
 
 
