@@ -92,16 +92,16 @@ class EmpiricalLinesCard(EffectCard, name="empirical_lines", params=EmpiricalLin
             return EmpiricalLines(lines_dn=[])
         med_s = float(np.median(share))
         chosen = (p > LINE_FACTOR * float(np.median(p))) & inner
+        dpeak = int(np.argmax(np.where(inner, p, -np.inf)))
+        chosen[dpeak] = True  # the darks' strongest line always
         gspec = dg.flat_column_gain_spectrum(d) if d.darks else None
         gain_chosen = np.zeros_like(chosen)
         if gspec is not None:
             gain_chosen = (gspec.power > LINE_FACTOR * float(np.median(gspec.power))) & inner
             gpeak = int(np.argmax(np.where(inner, gspec.power, -np.inf)))
-            dpeak = int(np.argmax(np.where(inner, p, -np.inf)))
             # the flats' strongest gain line too where it stands further out than the darks' peak
             if gspec.power[gpeak] / np.median(gspec.power) > p[dpeak] / np.median(p):
                 gain_chosen[gpeak] = True
-        chosen[int(np.argmax(np.where(inner, p, -np.inf)))] = True  # the darks' strongest line always
         lines = []
         g_med = float(np.median(gspec.share)) if gspec is not None else 0.0
         for i in np.flatnonzero(chosen | gain_chosen):
