@@ -772,6 +772,28 @@ def _parity_centred(profile: np.ndarray) -> np.ndarray:
     return out
 
 
+def _map_column_profile(mean_map: np.ndarray) -> tuple[np.ndarray, float, int]:
+    """(column profile, variance, rows) of a temporal-mean map: plane-centred, clipped at 5 robust sigma,
+    row means removed; the profile is the column means with each column parity's mean removed
+    (:func:`_parity_centred`)."""
+    m = _clip_robust(plane_centre(mean_map))
+    m = m - m.mean(axis=1, keepdims=True)
+    return _parity_centred(m.mean(axis=0)), float(np.var(m)), m.shape[0]
+
+
+def _cross_periodogram(ca: np.ndarray, cb: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Of two profiles of the same pattern (independent noise): the periodogram of their mean
+    (``|rfft|^2``), each bin's share of their covariance (``2 Re(A_k conj(B_k)) / W^2``, 1 at 0 and W/2:
+    the shares sum to the covariance) and the rfft coefficients of their mean, all from bin 1."""
+    a, b = np.fft.rfft(ca - ca.mean()), np.fft.rfft(cb - cb.mean())
+    w = ca.size
+    share = 2.0 * np.real(a * np.conj(b)) / w ** 2
+    if w % 2 == 0:
+        share[-1] /= 2
+    mean = (a + b) / 2
+    return np.abs(mean)[1:] ** 2, share[1:], mean[1:]
+
+
 def column_profiles(d: CaptureData):
     """Column profiles of the mean maps of the even and of the odd frames (darks, else the
     longest flat): plane-centred, clipped at 5 robust sigma, row means removed, each column parity's
@@ -783,12 +805,7 @@ def column_profiles(d: CaptureData):
             d.cache["colprof"] = None
         else:
             allf = np.concatenate(stacks).astype(np.float64)
-            out = []
-            for half in (allf[0::2], allf[1::2]):
-                m = _clip_robust(plane_centre(half.mean(0)))
-                m = m - m.mean(axis=1, keepdims=True)
-                out.append((_parity_centred(m.mean(axis=0)), float(np.var(m)), m.shape[0]))
-            d.cache["colprof"] = out
+            d.cache["colprof"] = [_map_column_profile(half.mean(0)) for half in (allf[0::2], allf[1::2])]
     return d.cache["colprof"]
 
 
@@ -813,12 +830,8 @@ def column_profile_spectrum(d: CaptureData) -> tuple[np.ndarray, np.ndarray, int
             d.cache["colspec"] = None
         else:
             (ca, _, _), (cb, _, _) = prof
-            a, b = np.fft.rfft(ca - ca.mean()), np.fft.rfft(cb - cb.mean())
-            w = ca.size
-            share = 2.0 * np.real(a * np.conj(b)) / w ** 2
-            if w % 2 == 0:
-                share[-1] /= 2
-            d.cache["colspec"] = (np.abs((a + b) / 2)[1:] ** 2, share[1:], w)
+            power, share, _ = _cross_periodogram(ca, cb)
+            d.cache["colspec"] = (power, share, ca.size)
     return d.cache["colspec"]
 
 
@@ -869,11 +882,8 @@ class GainLineSpectrum:
 def _profile_halves(stack: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Column profiles of the mean maps of a stack's even and odd frames, as :func:`column_profiles` makes
     them (plane-centred, clipped at 5 robust sigma, row means removed, column parities centred)."""
-    out = []
-    for half in (stack[0::2], stack[1::2]):
-        m = _clip_robust(plane_centre(half.mean(0, dtype=np.float64)))
-        out.append(_parity_centred((m - m.mean(axis=1, keepdims=True)).mean(axis=0)))
-    return out[0], out[1]
+    return (_map_column_profile(stack[0::2].mean(0, dtype=np.float64))[0],
+            _map_column_profile(stack[1::2].mean(0, dtype=np.float64))[0])
 
 
 def flat_column_gain_spectrum(d: CaptureData) -> GainLineSpectrum | None:
@@ -901,13 +911,9 @@ def flat_column_gain_spectrum(d: CaptureData) -> GainLineSpectrum | None:
         norm = sum(s for _f, s in lit)
         ra = sum(fa - da for fa, _fb in halves) / norm
         rb = sum(fb - db for _fa, fb in halves) / norm
-        w = ra.size
-        a, b = np.fft.rfft(ra - ra.mean()), np.fft.rfft(rb - rb.mean())
-        share = 2.0 * np.real(a * np.conj(b)) / w ** 2
-        if w % 2 == 0:
-            share[-1] /= 2
+        power, share, gain = _cross_periodogram(ra, rb)
         off = np.fft.rfft((da + db) / 2 - (da + db).mean() / 2)
-        d.cache["gainspec"] = GainLineSpectrum(np.abs((a + b) / 2)[1:] ** 2, share[1:], ((a + b) / 2)[1:], off[1:], w)
+        d.cache["gainspec"] = GainLineSpectrum(power, share, gain, off[1:], ra.size)
     return d.cache["gainspec"]
 
 
