@@ -93,6 +93,7 @@ from scipy import fft as sfft
 from scipy import stats as sst
 from scipy.special import ndtri_exp
 
+from .emva1288 import DARK_VARIANCE_FLOOR_DN2
 from .pixelwise import RTN_GAP_SIGMA, RTN_LEVEL_VAR, median_box, temporal_median, two_level_splits
 
 PLANE_OFFSETS = ((0, 0), (0, 1), (1, 0), (1, 1))
@@ -410,17 +411,19 @@ def ptc_curvature(d: CaptureData):
     two flat levels already give the three points a curvature needs (an EMVA 1288-style set with two
     illuminations).
 
-    Darks narrower than one ADC code (temporal variance below the uniform quantiser's ``step^2 / 12``, the
-    step read off the used codes, :func:`adc_step`) are not a point of the curve: their variance is
-    set by where the code edges around the black level lie (a differential non-linearity moves it as much
-    as the read noise does), the regime where Sheppard's correction does not hold (EMVA 1288 Release 4.0,
-    sec. 2). The curvature then comes from three flat levels or more, else it is not applicable."""
+    Quantisation-limited darks (temporal variance below 0.24 step^2, the step read off the used codes,
+    :func:`adc_step`) are not a point of the curve: their variance is set by where the code edges around
+    the black level lie (a differential non-linearity moves it as much as the read noise does), the regime
+    where Sheppard's ``step^2 / 12`` correction does not hold. 0.24 DN^2 is the EMVA 1288 Release 4.0
+    Linear standard's floor for the temporal dark variance (eqs. 53-54: below it the dark noise
+    is not measured, only bounded), here in units of the code width. The curvature then comes from three
+    flat levels or more, else it is not applicable."""
     darks, flats = d.ptc_points()
     mu0 = np.mean([p[:, 0] for p in darks], axis=0) if darks else np.zeros(4)
-    if darks and np.mean([p[:, 1] for p in darks]) < adc_step(d) ** 2 / 12.0:
+    if darks and np.mean([p[:, 1] for p in darks]) < DARK_VARIANCE_FLOOR_DN2 * adc_step(d) ** 2:
         if len(flats) < 3:
-            raise NotApplicable("the darks sit inside one ADC code (temporal variance below step^2/12) and "
-                                "fewer than 3 flat levels are left for the curvature")
+            raise NotApplicable("the darks are quantisation-limited (temporal variance below 0.24 step^2, "
+                                "EMVA 1288) and fewer than 3 flat levels are left for the curvature")
         darks = []
     if len(flats) + (1 if darks else 0) < 3:
         return None
@@ -1145,7 +1148,7 @@ def _telegraph(d: CaptureData):
     s2 = float(sst.trim_mean(np.var(v, axis=0, ddof=1), 0.01))
     if not s2 > 0:
         raise NotApplicable("the dark frames' temporal variance is 0 (constant or quantisation-dominated darks)")
-    if s2 < adc_step(d) ** 2 / 12.0:  # as ptc_curvature's darks inside one code
+    if s2 < adc_step(d) ** 2 / 12.0:  # above it a one-code step is < 3.5 sigma, under RTN_GAP_SIGMA
         raise NotApplicable("the darks sit inside one ADC code (temporal variance below step^2/12): a pixel's "
                             "occasional step to the next code is the quantiser's, not a second level")
     (mask, gap, high), (loose, _g, _h) = two_level_splits(v, s2, [(2, RTN_GAP_SIGMA, RTN_LEVEL_VAR),

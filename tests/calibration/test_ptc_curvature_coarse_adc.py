@@ -74,11 +74,57 @@ def test_two_flat_levels_and_darks_inside_one_code_are_not_applicable():
     d = _capture([2500.0, 7000.0], dnl=0.3)
     darks, _ = d.ptc_points()
     assert np.all(np.array(darks)[..., 1] == 0.0)  # every dark value on the black level's code
-    with pytest.raises(dg.NotApplicable, match="inside one ADC code"):
+    with pytest.raises(dg.NotApplicable, match="quantisation-limited"):
         dg.ptc_curvature(d)
 
 
 def test_darks_spread_over_codes_still_count():
     """A 1-DN ADC with a 1.5-DN read noise: the dark point is a point of the curve, as before."""
     d = _capture([2500.0, 7000.0], dnl=0.0, read=1.5, step_edges=False)
+    assert dg.ptc_curvature(d) == pytest.approx(_three_point_curvature(d), rel=1e-9, abs=1e-12)
+
+
+def _flats_only_curvature(d) -> float:
+    """The curvature through the flats alone (an independent transcription: a quadratic in the mean above the
+    darks' mean, per plane)."""
+    darks, flats = d.ptc_points()
+    mu0 = darks[0][:, 0]
+    pts = np.array(flats)
+    out = []
+    for c in range(4):
+        x, y = pts[:, c, 0] - mu0[c], pts[:, c, 1]
+        c2, c1, _ = np.polyfit(x, y, 2)
+        out.append(c2 * x.max() / c1)
+    return float(np.mean(out))
+
+
+def test_quantisation_limited_darks_above_one_twelfth_of_a_step_squared():
+    """Darks over three codes (read noise 0.33 step) but under EMVA 1288's 0.24 DN^2 floor in units of the code
+    width (~0.12 step^2, above step^2/12 = 0.083): their variance is set by where the code edges lie, so
+    they are not a point of the curve. Two flat levels: not applicable; three: the flats' curvature."""
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        edges = _edges(0.3, rng)
+
+        def frames(level_e, rng=rng, edges=edges):
+            e = rng.poisson(level_e, (N, *SHAPE)) if level_e else 0.0
+            return _adc(BLACK + K * e + rng.normal(0.0, 3.3, (N, *SHAPE)), edges)
+
+        dark = frames(0.0)
+        two = dg.CaptureData([dark], [frames(2500.0), frames(7000.0)], [], np.full((2, 2), BLACK), WHITE, "RGGB")
+        dv = np.mean(np.array(two.ptc_points()[0])[..., 1]) / STEP ** 2
+        assert 1.0 / 12.0 < dv < 0.24, dv
+        with pytest.raises(dg.NotApplicable, match="quantisation-limited"):
+            dg.ptc_curvature(two)
+        three = dg.CaptureData([dark], [frames(x) for x in (1500.0, 4000.0, 8000.0)], [], np.full((2, 2), BLACK),
+                               WHITE, "RGGB")
+        assert dg.ptc_curvature(three) == pytest.approx(_flats_only_curvature(three), rel=1e-9, abs=1e-12)
+
+
+def test_darks_at_half_a_code_of_read_noise_count():
+    """Read noise 0.55 step (dark variance ~0.38 step^2, above the floor): the dark point is a point of the
+    curve, on a coarse ADC too."""
+    d = _capture([2500.0, 7000.0], dnl=0.0, read=5.5)
+    dv = np.mean(np.array(d.ptc_points()[0])[..., 1]) / STEP ** 2
+    assert dv > 0.24, dv
     assert dg.ptc_curvature(d) == pytest.approx(_three_point_curvature(d), rel=1e-9, abs=1e-12)
