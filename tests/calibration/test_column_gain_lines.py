@@ -73,3 +73,19 @@ def test_empirical_lines_fits_the_gain_part_with_its_phase(gain_rel):
 def test_empirical_lines_without_a_gain_pattern_fits_the_offset_lines_only():
     p = card_for("empirical_lines").fit(capture(np.random.default_rng(5), 3.0, 0.0), Model(), None)
     assert p.lines_dn and all(len(line) == 2 for line in p.lines_dn)
+
+
+def test_a_card_proposed_by_the_flats_does_not_take_the_darks_strongest_bin():
+    """A gain mismatch alone (no offset mismatch): proposed by the flats' statistic, the card's lines are the
+    gain line's bin only; the darks' strongest bin (white noise there) is a line only where the darks'
+    statistic proposed the card."""
+    from simcam.calibration.effects.card import FitContext
+
+    card = card_for("empirical_lines")
+    for s in range(4):
+        d = capture(np.random.default_rng(40 + s), 0.0, 0.008)
+        by_flats = card.fit(d, Model(), FitContext(diagnostic="flat_col_spectrum_peak"))
+        assert [line[0] for line in by_flats.lines_dn] == [0.25]
+        assert len(by_flats.lines_dn[0]) == 4 and by_flats.lines_dn[0][2] > 0
+        by_darks = card.fit(d, Model(), FitContext(diagnostic="col_fpn_spectrum_peak"))
+        assert len(by_darks.lines_dn) >= len(by_flats.lines_dn)

@@ -21,6 +21,7 @@ import numpy as np
 
 from .. import diagnostics as dg
 from .card import EffectParams, OffsetSigmaCard, quantity
+from .empirical_lines import line_offset
 
 
 class ColumnFpn(EffectParams):
@@ -36,5 +37,5 @@ class ColumnFpnCard(OffsetSigmaCard, name="column_fpn", params=ColumnFpn, diagno
         (ca, _va, _h), (cb, _vb, _) = dg.column_profiles(d)
         lines = model.effects.get("empirical_lines")
         s2 = float(np.mean((ca - ca.mean()) * (cb - cb.mean())))
-        s2 -= sum(line[1] ** 2 / 2 for line in lines.lines_dn) if lines is not None else 0.0
+        s2 -= sum(line_offset(line) ** 2 / 2 for line in lines.lines_dn) if lines is not None else 0.0
         return ColumnFpn(sigma_dn=float(np.sqrt(max(s2, 0.0))))

@@ -15,7 +15,8 @@ exposure-dependent.
 
 Fit. From the column profiles of the even- and of the odd-frame dark mean maps
 (:func:`simcam.calibration.diagnostics.column_profile_spectrum`): the lines are the bins whose
-periodogram exceeds :data:`LINE_FACTOR` times its median (the largest bin always; the Nyquist bin,
+periodogram exceeds :data:`LINE_FACTOR` times its median (the largest bin always where the darks'
+statistic proposed the card; the Nyquist bin,
 a period of two columns, is a CFA column's offset and is left to the black level), and each line's
 variance is its bin's share of the two profiles' covariance less the median share (the white part:
 ``column_fpn``, DSNU averaged down the columns): temporal noise, independent between the halves,
@@ -57,7 +58,8 @@ class EmpiricalLines(EffectParams):
     axis: str = quantity("", "the line the offset is shared along (column)", scale=None, default="column")
 
 
-def _offset(line) -> float:
+def line_offset(line) -> float:
+    """A line's offset amplitude (DN): its second entry."""
     return float(line[1])
 
 
@@ -93,7 +95,8 @@ class EmpiricalLinesCard(EffectCard, name="empirical_lines", params=EmpiricalLin
         med_s = float(np.median(share))
         chosen = (p > LINE_FACTOR * float(np.median(p))) & inner
         dpeak = int(np.argmax(np.where(inner, p, -np.inf)))
-        chosen[dpeak] = True  # the darks' strongest line always
+        if getattr(ctx, "diagnostic", None) != "flat_col_spectrum_peak":  # proposed by the darks: their strongest line
+            chosen[dpeak] = True
         gspec = dg.flat_column_gain_spectrum(d) if d.darks else None
         gain_chosen = np.zeros_like(chosen)
         if gspec is not None:
@@ -115,13 +118,13 @@ class EmpiricalLinesCard(EffectCard, name="empirical_lines", params=EmpiricalLin
         return EmpiricalLines(lines_dn=lines)
 
     def is_null(self, p):
-        return not any(_offset(line) > 0 or _gain(line)[0] > 0 for line in p.lines_dn)
+        return not any(line_offset(line) > 0 or _gain(line)[0] > 0 for line in p.lines_dn)
 
     def marginal(self, p, v, lin, model):
         # a line of offset a and gain g (phase delta between them) on the signal x: variance over the columns
         # (a^2 + (g x)^2) / 2 + a g x cos(delta)
         for line in p.lines_dn:
-            a, (g, delta) = _offset(line), _gain(line)
+            a, (g, delta) = line_offset(line), _gain(line)
             v = v + (a * a + (g * lin) ** 2) / 2 + a * g * lin * np.cos(delta)
         return v
 
@@ -130,7 +133,7 @@ class EmpiricalLinesCard(EffectCard, name="empirical_lines", params=EmpiricalLin
 
         fs = model.full_scale_dn
         return ProfileTerm(effect={"type": self.name, "axis": p.axis,
-                                   "lines": [[float(line[0]), _offset(line) / fs, *(_gain(line) if len(line) == 4 else ())]
+                                   "lines": [[float(line[0]), line_offset(line) / fs, *(_gain(line) if len(line) == 4 else ())]
                                              for line in p.lines_dn]})
 
     def from_profile(self, entry, full_scale_dn):
@@ -146,7 +149,7 @@ class EmpiricalLinesCard(EffectCard, name="empirical_lines", params=EmpiricalLin
         def one(line):
             g, delta = _gain(line)
             gain = f" + gain {g:.3g} at {delta:+.2f} rad" if g > 0 else ""
-            return f"period {1 / line[0]:.3g} px: {_offset(line):.3g} DN{gain}"
+            return f"period {1 / line[0]:.3g} px: {line_offset(line):.3g} DN{gain}"
 
         shown = ", ".join(one(line) for line in p.lines_dn[:4])
         more = f" and {len(p.lines_dn) - 4} more" if len(p.lines_dn) > 4 else ""
