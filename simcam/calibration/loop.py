@@ -38,7 +38,15 @@ Per ISO group of a capture set:
    apart by the held-out frames; of those, one the sensor's previous ISO groups added is taken (a hot
    pixel saturated at a high ISO reads as a stuck one there), else the one the strongest residual
    proposed (:meth:`Loop._break_tie`).
-   When no candidate beats the current model, the proposing diagnostics are ``unexplained`` with the
+   Two or more candidates that gain beyond their sampling noise but are refuted (the held-out error
+   grows, or a statistic breaks) may each explain part of one residual: a black offset beside a dark
+   level that rises with the exposure time, where the offset alone moves the long darks away and the
+   rise alone the short ones. When no candidate beats the current model, or a refuted one gained more
+   than the chosen one by twice their combined SEs, each pair of them (the :data:`JOINT_CANDIDATES`
+   best) is fitted jointly (the second effect's fit sees the first in the model) and raced like a
+   single candidate; the best of the pairs that beat the current model and the chosen single one is
+   taken, and a pair adds both effects (:meth:`Loop._joint`).
+   When nothing beats the current model, the proposing diagnostics are ``unexplained`` with the
    candidates' scores as the reason, and the loop stops (also when nothing significant is left, or
    after ``max_iterations``).
 
@@ -52,6 +60,7 @@ no separate bootstrap is simulated.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import hashlib
@@ -61,7 +70,7 @@ import numpy as np
 
 from ..errors import DatasetError
 from . import diagnostics as dg
-from .attribution import MIN_GAIN, compare
+from .attribution import GAIN_Z, MIN_GAIN, compare
 from .binning import hist_uniform
 from .capture import CaptureSet, Sequence
 from .effects import FitContext, card_for, effect_for, excluded_by
@@ -280,6 +289,12 @@ def nll_per_dim(part, specs, model: LoopModel) -> float | None:
 HELDOUT_KEYS = ("kl", "nll", "kl_floor", "kl_excess", "kl_structured", "structured")
 
 
+def candidate_label(rec: dict) -> str:
+    """A candidate's name in the report: its effect, ``first + second`` for a pair fitted jointly."""
+    joint = rec.get("joint_with")
+    return f"{joint['effect']} + {rec['effect']}" if joint else rec["effect"]
+
+
 def _summary(held: dict) -> dict:
     """The held-out numbers kept in a :class:`GroupResult` (no sample arrays)."""
     return {k: held[k] for k in HELDOUT_KEYS}
@@ -299,6 +314,11 @@ UNCERTAIN_Z = 1.5
 #: a diagnostic the current model reproduces with a held-out p-value at least this can refute a candidate
 #: that fails it (:meth:`Loop._broken`)
 REFUTE_PASS_P = 0.1
+
+
+#: refuted candidates (gain beyond its noise, refuted by the held-out error or a broken statistic) of which
+#: the pairs are fitted jointly (the best by gain; :meth:`Loop._joint` says when)
+JOINT_CANDIDATES = 3
 
 
 #: environment variable that sets the loop's default thread count (e.g. 1 where processes already share the cores)
@@ -424,6 +444,7 @@ class Loop:
         self.g, self.cfg, self.iso = group, cfg, iso
         #: effects added at the sensor's other ISOs: taken where the held-out frames cannot tell candidates apart
         self.preferred = set(preferred)
+        self.discs: list = []  # the current model's battery, set each iteration (Loop.run)
         #: diagnostic -> why it is not applicable (on the data, or on the simulated captures)
         self.not_applicable: dict[str, str] = {}
         self.data_stats = dg.compute_all(group.fit_data, reasons=self.not_applicable)
@@ -545,6 +566,16 @@ class Loop:
                                      if sp.kind == "dark" and not sp.series_only])
         if card.needs_darks and not ctx.dark_specs:
             return dict(rec, skipped="needs a dark sequence to fit"), None
+        pre = card.prerequisite(self.g.fit_data, model)
+        if pre is not None:  # fitted first, from its own diagnostic where the battery has it; the candidate adds both
+            pre_from = next((d for d in self.discs if d.name in card_for(pre).diagnostics), chosen)
+            first = fit_effect(pre, self.g.fit_data, model, dataclasses.replace(
+                ctx, diagnostic=pre_from.name, value=pre_from.value, sim_mean=pre_from.sim_mean))
+            if card_for(pre).is_null(first.effects[pre]):
+                return dict(rec, skipped=f"needs {pre} first, whose fit has zero magnitude"), None
+            rec["joint_with"] = {"effect": pre, "fitted_from": pre_from.name,
+                                 "parameters": first.effects[pre].to_dict(), "prerequisite": True}
+            model = first
         cand = fit_effect(effect, self.g.fit_data, model, ctx)
         rec["parameters"] = cand.effects[effect].to_dict()
         if card.is_null(cand.effects[effect]):
@@ -692,6 +723,38 @@ class Loop:
             top[0]["tie_broken_by"] = f"proposed by the strongest residual ({sig[first(top)].name})"
         return top
 
+    def _joint(self, tried: list, proposals: dict, tag: int, held_cur: dict, best: tuple) -> list:
+        """Pairs of refuted candidates fitted jointly (module docstring, step 5): of the candidates whose
+        held-out gain beats the current model's beyond its noise but which were refuted, the
+        :data:`JOINT_CANDIDATES` best by gain, each pair in order of gain (the second fitted with the first
+        in the model), raced as :meth:`_race` does. Only when ``best`` (the single candidate chosen) does
+        not beat the current model, or a refuted one gained more than it by twice their combined SEs (a
+        small gain beside a large refuted one is what is left when two effects share one residual).
+        Returns ``(record, model, held-out dict)`` per pair; a pair's record is the second effect's,
+        with ``joint_with`` the first's record."""
+        refuted = [(rec, cand) for rec, cand, _h in tried if cand is not None and "left_race" not in rec
+                   and "joint_with" not in rec
+                   and (rec.get("error_grew") or rec.get("breaks"))
+                   and rec["heldout_gain"] > MIN_GAIN and rec["heldout_gain"] > GAIN_Z * rec["heldout_gain_sd"]]
+        refuted = sorted(refuted, key=lambda t: -t[0]["heldout_gain"])[:JOINT_CANDIDATES]
+        b = best[0]
+        if len(refuted) < 2 or (b["beats_current"] and refuted[0][0]["heldout_gain"] <= b["heldout_gain"] + 2 * np.hypot(
+                b["heldout_gain_sd"], refuted[0][0]["heldout_gain_sd"])):
+            return []
+        fits = []
+        for i, (ra, ca) in enumerate(refuted):
+            for rb, _cb in refuted[i + 1:]:
+                eb = rb["effect"]
+                if eb in ca.effects or excluded_by(eb, ca.effects):
+                    continue
+                via = next(d for d in proposals[eb] if d.name == rb["fitted_from"])
+                rec, cand = self._fit_candidate(eb, proposals[eb], ca, tag, (via, rb.get("form", "")))
+                rec["joint_with"] = {k: ra[k] for k in ("effect", "form", "fitted_from", "parameters") if k in ra}
+                rec["proposed_by"] = ra["proposed_by"] + [n for n in rec["proposed_by"] if n not in ra["proposed_by"]]
+                if cand is not None:
+                    fits.append((rec, cand))
+        return self._race(fits, held_cur) if fits else []
+
     def _floor_map(self) -> dict:
         return {n: self.held_floor(n) for n in self.applicable}
 
@@ -724,6 +787,7 @@ class Loop:
             res.unexplained.append({"diagnostic": d.name, "discrepancy": d.z, "reason": reason})
 
         for _it in range(cfg.max_iterations):
+            self.discs = discs  # the current model's battery (a prerequisite's fit reads its diagnostic)
             sig = sorted((d for d in discs if d.significant and d.name not in excluded), key=strength, reverse=True)
             if not sig:
                 break
@@ -771,47 +835,73 @@ class Loop:
                     for d in proposals[rec["effect"]]:
                         unexplained(d, rec["skipped"])
                 continue
+            pairs = self._joint(tried, proposals, tag, held_cur, best)
+            if pairs:
+                tried = tried + pairs
+                good = [t for t in pairs + [best] if t[0]["beats_current"]]
+                if good:
+                    for rec, _c, _h in tried:
+                        rec["chosen"] = False
+                    best = self._break_tie(max(good, key=lambda t: t[0]["heldout_gain"]), good, sig)
+                    best[0]["chosen"] = True
             brec, cand, held = best
             effect = brec["effect"]
-            chosen = next(d for d in proposals[effect] if d.name == brec["fitted_from"])
             accepted = brec["beats_current"]
             new_discs = self.evaluate(cand, tag, held) if accepted else None
-            after = next((d for d in new_discs if d.name == chosen.name), None) if accepted else None
-            hb, ha = held_cur.get(chosen.name), held.get(chosen.name)
-            rec = {
-                "effect": effect, "parameters": brec["parameters"],
-                "diagnostic": chosen.name, "discrepancy_before": chosen.z,
-                "discrepancy_after": None if after is None else after.z,
-                "p_before": chosen.p, "p_after": None if after is None else after.p,
-                "heldout": {"kl_before": held_cur["kl"], "kl_after": held["kl"],
-                            "kl_excess_before": held_cur["kl_excess"], "kl_excess_after": held["kl_excess"],
-                            "kl_structured_before": held_cur["kl_structured"],
-                            "kl_structured_after": held["kl_structured"],
-                            "structured_before": held_cur["structured"],
-                            "structured_after": held["structured"],
-                            "nll_before": held_cur["nll"], "nll_after": held["nll"],
-                            "discrepancy_before": None if hb is None else hb.z,
-                            "discrepancy_after": None if ha is None else ha.z,
-                            "gain": brec["heldout_gain"], "gain_sd": brec["heldout_gain_sd"]},
-                "accepted": accepted,
-                "candidates": [t[0] for t in tried],
-            }
-            family = card_for(effect).family_of(cand.effects[effect])
-            if family is not None:  # an empirical component: its residual family
-                rec["not_in_vocabulary"] = family
+            joint = brec.get("joint_with") if accepted else None
+
+            def record(eff: str, fitted_from: str, parameters: dict) -> dict:
+                chosen = next(d for d in discs if d.name == fitted_from)
+                after = next((d for d in new_discs if d.name == chosen.name), None) if accepted else None
+                hb, ha = held_cur.get(chosen.name), held.get(chosen.name)
+                rec = {
+                    "effect": eff, "parameters": parameters,
+                    "diagnostic": chosen.name, "discrepancy_before": chosen.z,
+                    "discrepancy_after": None if after is None else after.z,
+                    "p_before": chosen.p, "p_after": None if after is None else after.p,
+                    "heldout": {"kl_before": held_cur["kl"], "kl_after": held["kl"],
+                                "kl_excess_before": held_cur["kl_excess"], "kl_excess_after": held["kl_excess"],
+                                "kl_structured_before": held_cur["kl_structured"],
+                                "kl_structured_after": held["kl_structured"],
+                                "structured_before": held_cur["structured"],
+                                "structured_after": held["structured"],
+                                "nll_before": held_cur["nll"], "nll_after": held["nll"],
+                                "discrepancy_before": None if hb is None else hb.z,
+                                "discrepancy_after": None if ha is None else ha.z,
+                                "gain": brec["heldout_gain"], "gain_sd": brec["heldout_gain_sd"]},
+                    "accepted": accepted,
+                    "candidates": [],
+                }
+                family = card_for(eff).family_of(cand.effects[eff])
+                if family is not None:  # an empirical component: its residual family
+                    rec["not_in_vocabulary"] = family
+                return rec
+
+            # a pair fitted jointly (Loop._joint) adds both effects: one record each, the first listing the candidates
+            recs = ([dict(record(joint["effect"], joint["fitted_from"], cand.effects[joint["effect"]].to_dict()),
+                          joint_with=effect)] if joint else [])
+            recs.append(record(effect, brec["fitted_from"], brec["parameters"]))
+            if joint:
+                recs[-1]["joint_with"] = joint["effect"]
+                why = (f"{effect} is fitted beside {joint['effect']}, which the model lacked" if joint.get("prerequisite")
+                       else "each alone was refuted on the held-out frames")
+                for r in recs:
+                    r["joint_why"] = why
+            recs[0]["candidates"] = [t[0] for t in tried]
             gone = [n for n in model.effects if n not in cand.effects]
             if gone:  # refitted to the identity beside the new effect (simcam.calibration.fit.fit_effect)
-                rec["removed"] = {n: f"refitted to zero magnitude with {effect} in the model" for n in gone}
+                recs[-1]["removed"] = {n: f"refitted to zero magnitude with {effect} in the model" for n in gone}
             res.plots.setdefault("hists", []).append(
-                (effect, held_cur["real_noise"], held_cur["model_noise"], held["model_noise"]))
-            res.iterations.append(rec)
+                (" + ".join(r["effect"] for r in recs), held_cur["real_noise"], held_cur["model_noise"],
+                 held["model_noise"]))
+            res.iterations.extend(recs)
             if accepted:
                 model, discs, held_cur = cand, new_discs, held
                 continue
             # no candidate beats the current model: every proposing diagnostic stays unexplained
             listed = "; ".join(
-                f"{r['effect']}: {r['skipped']}" if "skipped" in r else
-                f"{r['effect']}: held-out gain {r['heldout_gain']:.3g} ± {r['heldout_gain_sd']:.2g} nats"
+                f"{candidate_label(r)}: {r['skipped']}" if "skipped" in r else
+                f"{candidate_label(r)}: held-out gain {r['heldout_gain']:.3g} ± {r['heldout_gain_sd']:.2g} nats"
                 + (f", held-out error grew ({r['error_grew']})" if r.get("error_grew") else "")
                 + "".join(f", breaks {b['diagnostic']} (held-out z {b['z_before']:.2g} -> {b['z']:.2g})"
                           for b in r.get("breaks", ()))

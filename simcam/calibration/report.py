@@ -623,6 +623,9 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
             h = it["heldout"]
             label = it["effect"] + (f" <i>(empirical, not in the vocabulary: {html.escape(it['not_in_vocabulary'])})</i>"
                                     if it.get("not_in_vocabulary") else "")
+            if it.get("joint_with"):
+                label += (f" <i>(fitted jointly with {html.escape(it['joint_with'])}: "
+                          f"{html.escape(it.get('joint_why', ''))})</i>")
             label += "".join(f"<br><i>{html.escape(n)} removed: {html.escape(why)}</i>"
                              for n, why in (it.get("removed") or {}).items())
             parts.append(f"<tr><td>{i}</td><td class=l>{label}</td><td class=l>{it['diagnostic']}</td>"
@@ -692,7 +695,9 @@ def _candidates_table(iterations: list[dict]) -> str:
             again = (f" (raced again: it had left {html.escape(c['raced_again'].split(';')[0])})"
                      if c.get("raced_again") else "")  # behind a leader that was then refuted
             several = len(c["proposed_by"]) > 1 and c.get("fitted_from")
-            name = c["effect"] + (f" ({c['form']})" if c.get("form") else "") + (
+            joint = c.get("joint_with")
+            name = (f"{joint['effect']}" + (f" ({joint['form']})" if joint.get("form") else "") + " + "
+                    if joint else "") + c["effect"] + (f" ({c['form']})" if c.get("form") else "") + (
                 f" (fitted from {c['fitted_from']})" if several else "")
             rows.append(f"<tr><td>{i}</td><td class=l>{name}</td><td class=l>{', '.join(c['proposed_by'])}</td>"
                         f"<td>{_fmt(c['heldout_gain'])}</td><td>{_fmt(c['heldout_gain_sd'])}</td>"

@@ -110,3 +110,29 @@ def test_loop_fits_the_dnl_of_the_test_generator():
     r = run_case(("adc_dnl",))
     assert list(r.model.effects) == ["adc_dnl"] and not r.unexplained
     assert r.model.effects["adc_dnl"].dnl_sigma == pytest.approx(0.2, rel=0.2)
+
+
+def test_the_fit_waits_for_the_quantisers_step():
+    """On a coarse ADC (8-DN codes, unequal widths) the step is the card's prerequisite while the model's
+    codes are 1 DN, and a fit without it is null and says why (its widths would be relative to codes the
+    data does not have); once the model has the step, it is fitted from the statistic's excess as usual."""
+    from simcam.calibration.effects import CARDS, FitContext
+    from simcam.calibration.model import LoopModel
+
+    rng = np.random.default_rng(5)
+    k = np.arange(600)
+    edges = np.sort((k + 0.5 + 0.25 * rng.standard_normal(k.size)) * 8.0)
+    v = 2000.0 + 160.0 * rng.standard_normal((8, 256, 256))
+    d = _capture((np.searchsorted(edges, v, side="right") * 8.0).astype(np.float32))
+    assert dg.adc_step(d) == 8.0
+    ctx = FitContext(diagnostic="code_width_spread", value=dg.code_width_spread(d), sim_mean=0.0)
+    card = CARDS["adc_dnl"]
+    fine = LoopModel("RGGB", np.full((2, 2), 0.0), 4095.0, 1.0, 2.0, 4.0)
+    p = card.fit(d, fine, ctx)
+    assert card.is_null(p) and p.coarser_codes_dn == 8.0 and "quantization" in card.null_reason(p)
+    assert card.prerequisite(d, fine) == "quantization"  # the loop fits the step first, the candidate adds both
+    coarse = LoopModel("RGGB", np.full((2, 2), 0.0), 4095.0, 1.0, 2.0, 4.0, effects={
+        "quantization": CARDS["quantization"].params(step_dn=8.0)})
+    assert card.prerequisite(d, coarse) is None
+    p = card.fit(d, coarse, ctx)
+    assert p.coarser_codes_dn is None and p.dnl_sigma == pytest.approx(0.25, rel=0.3)

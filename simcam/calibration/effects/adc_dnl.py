@@ -22,6 +22,15 @@ card's step): a coarse ADC has unequal codes as a fine one does, its transition 
 its own code, and the histogram test reads it on the used codes' lattice (``code_histogram``). Beside
 ``quantization`` both are kept: the step is the quantiser's, the unequal widths this card's (the noise
 stage applies ``adc_dnl`` first; its codes are on the quantiser's grid, which leaves them unchanged).
+While the data's codes are coarser than the model's (``adc_step`` more than :data:`CODE_LATTICE_RATIO`
+times ``LoopModel.q``: the coarse step not yet modelled) the candidate is the step and the widths
+together: ``quantization`` is its prerequisite, fitted first (the loop's ``_fit_candidate``), and the
+candidate adds both. Fitted on 1-DN codes the widths would be relative to codes the data does not
+have: beside them the step's own candidate was refuted on a 6-DN ADC (the independent simulator's
+quantisation + DNL case at ``--seed 2034``: the model then took a black offset and a heavy-tailed read
+noise for what the quantiser's codes do to the darks); left out until the step was in, a black offset
+took their place on a 16-DN ADC (the same case at ``--seed 2035``, ISO 3200). Without the step in the
+model the fit is null.
 
 Profile. ``{type: adc_dnl, range_dn, offset_dn, bits, dnl_sigma, step_dn}``: the ADC on normalised raw
 (range ``white - black``, the mean black level as the codes' offset, enough codes of ``step_dn`` DN for
@@ -36,6 +45,9 @@ import numpy as np
 
 from .card import EffectCard, EffectParams, ProfileTerm, quantity
 
+#: the fit is null while the data's code spacing exceeds the model's codes by more than this factor
+CODE_LATTICE_RATIO = 1.5
+
 #: variance of a code's relative count deviation per dnl_sigma^2 (module docstring)
 WIDTH_VARIANCE_PER_SIGMA2 = 219.0 / 49.0
 
@@ -43,16 +55,37 @@ WIDTH_VARIANCE_PER_SIGMA2 = 219.0 / 49.0
 class AdcDnl(EffectParams):
     dnl_sigma: float = quantity("LSB", "standard deviation of the ADC's transition offsets (LSB; DNL std = "
                                 "sqrt(2) times it)")
+    coarser_codes_dn: float | None = quantity("DN", "only on a null fit: the data's code spacing, coarser than the "
+                                              "model's codes", default=None)
 
 
 class AdcDnlCard(EffectCard, name="adc_dnl", params=AdcDnl, diagnostics=("code_width_spread",),
                  null_field="dnl_sigma"):
 
     def fit(self, d, model, ctx):
+        from .. import diagnostics as dg
+
+        step = dg.adc_step(d)
+        if step > CODE_LATTICE_RATIO * float(model.q):  # the step first (module docstring)
+            return AdcDnl(dnl_sigma=0.0, coarser_codes_dn=step)
         excess = float(ctx.value) - float(ctx.sim_mean)
         if not math.isfinite(excess) or excess <= 0:
             return AdcDnl(dnl_sigma=0.0)
         return AdcDnl(dnl_sigma=float(min(math.sqrt(excess / WIDTH_VARIANCE_PER_SIGMA2), 2.0)))
+
+    def prerequisite(self, d, model):
+        """``quantization`` while the data's codes are coarser than the model's (module docstring)."""
+        from .. import diagnostics as dg
+
+        if "quantization" in model.effects or dg.adc_step(d) <= CODE_LATTICE_RATIO * float(model.q):
+            return None
+        return "quantization"
+
+    def null_reason(self, p):
+        if p.coarser_codes_dn:
+            return (f"the data's codes are {p.coarser_codes_dn:.3g} DN apart, coarser than the model's: unequal "
+                    "widths are read on the quantiser's codes, so its step (quantization) comes first")
+        return None
 
     def to_profile(self, p, model):
         step = float(model.q)

@@ -321,6 +321,11 @@ class EffectCard:
         """Parameters fitted on the capture ``d`` (``CaptureData``) given the current ``model``."""
         raise NotImplementedError(f"{self.name}: no fit")
 
+    def prerequisite(self, d, model) -> str | None:
+        """An effect this one can only be fitted beside, where the model lacks it: the loop fits it first
+        and the candidate adds both (None: none)."""
+        return None
+
     def variants(self, proposed_by: list) -> list:
         """The proposing diagnostics (``Discrepancy`` objects, strongest first) to fit a candidate from,
         one candidate each: an effect with several forms, each seen first by its own diagnostic, is
