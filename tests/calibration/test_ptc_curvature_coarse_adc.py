@@ -42,11 +42,12 @@ def _capture(levels_e, *, dnl: float, read: float = READ, step_edges: bool = Tru
     return dg.CaptureData([frames(0.0)], [frames(x) for x in levels_e], [], np.full((2, 2), BLACK), WHITE, "RGGB")
 
 
-def _three_point_curvature(d) -> float:
-    """The curvature through the dark point and every flat, as ptc_curvature computes it when the darks
-    count (an independent transcription of its docstring's statistic)."""
+def _curvature(d, with_darks: bool) -> float:
+    """The curvature (quadratic coefficient times the highest level over the linear one, per plane, averaged)
+    of variance against the mean above the darks' mean, through the dark point and every flat or through
+    the flats alone: an independent transcription of ptc_curvature's docstring."""
     darks, flats = d.ptc_points()
-    pts = np.array(darks + flats)
+    pts = np.array(darks + flats if with_darks else flats)
     mu0 = darks[0][:, 0]
     out = []
     for c in range(4):
@@ -54,6 +55,10 @@ def _three_point_curvature(d) -> float:
         c2, c1, _ = np.polyfit(x, y, 2)
         out.append(c2 * x.max() / c1)
     return float(np.mean(out))
+
+
+def _three_point_curvature(d) -> float:
+    return _curvature(d, with_darks=True)
 
 
 def test_darks_inside_one_code_bend_the_curve_of_a_linear_sensor():
@@ -85,17 +90,7 @@ def test_darks_spread_over_codes_still_count():
 
 
 def _flats_only_curvature(d) -> float:
-    """The curvature through the flats alone (an independent transcription: a quadratic in the mean above the
-    darks' mean, per plane)."""
-    darks, flats = d.ptc_points()
-    mu0 = darks[0][:, 0]
-    pts = np.array(flats)
-    out = []
-    for c in range(4):
-        x, y = pts[:, c, 0] - mu0[c], pts[:, c, 1]
-        c2, c1, _ = np.polyfit(x, y, 2)
-        out.append(c2 * x.max() / c1)
-    return float(np.mean(out))
+    return _curvature(d, with_darks=False)
 
 
 def test_quantisation_limited_darks_above_one_twelfth_of_a_step_squared():
