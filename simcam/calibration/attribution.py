@@ -52,6 +52,12 @@ GAIN_Z = 3.0
 MIN_GAIN = 2.0
 
 
+def gain_beats(gain: float, sd: float) -> bool:
+    """A held-out gain (nats) with its SE beats the current model beyond the sampling noise: above
+    :data:`MIN_GAIN` and :data:`GAIN_Z` SEs."""
+    return gain > MIN_GAIN and gain > GAIN_Z * sd
+
+
 def t_logpdf(value: float, sims: np.ndarray, floor: float) -> float:
     """Log-density of ``value`` under the Student-t predictive law of a new draw given the simulated
     values ``sims`` (``R - 1`` degrees of freedom, location their mean, scale their SD, at least
@@ -83,7 +89,7 @@ class Comparison:
 
     def beats(self) -> bool:
         """The candidate beats the current model beyond the sampling noise (module docstring)."""
-        return self.gain > MIN_GAIN and self.gain > GAIN_Z * self.sd
+        return gain_beats(self.gain, self.sd)
 
     def top(self, n: int = 3) -> list[tuple[str, float]]:
         """The ``n`` statistics whose log-density changed most, with the change (nats)."""

@@ -70,7 +70,7 @@ import numpy as np
 
 from ..errors import DatasetError
 from . import diagnostics as dg
-from .attribution import GAIN_Z, MIN_GAIN, compare
+from .attribution import MIN_GAIN, compare, gain_beats
 from .binning import hist_uniform
 from .capture import CaptureSet, Sequence
 from .effects import FitContext, card_for, effect_for, excluded_by
@@ -735,7 +735,7 @@ class Loop:
         refuted = [(rec, cand) for rec, cand, _h in tried if cand is not None and "left_race" not in rec
                    and "joint_with" not in rec
                    and (rec.get("error_grew") or rec.get("breaks"))
-                   and rec["heldout_gain"] > MIN_GAIN and rec["heldout_gain"] > GAIN_Z * rec["heldout_gain_sd"]]
+                   and gain_beats(rec["heldout_gain"], rec["heldout_gain_sd"])]
         refuted = sorted(refuted, key=lambda t: -t[0]["heldout_gain"])[:JOINT_CANDIDATES]
         b = best[0]
         if len(refuted) < 2 or (b["beats_current"] and refuted[0][0]["heldout_gain"] <= b["heldout_gain"] + 2 * np.hypot(
