@@ -114,6 +114,7 @@ class GroupResult:
     heldout_base: dict = field(default_factory=dict)
     heldout_final: dict = field(default_factory=dict)
     not_applicable: dict = field(default_factory=dict)  # diagnostic -> reason
+    backward: list = field(default_factory=list)  # the backward step's tests (Loop._backward), in order
     bootstrap_null: str = ""  # what the residual battery's null was drawn from
 
 
@@ -755,6 +756,66 @@ class Loop:
                     fits.append((rec, cand))
         return self._race(fits, held_cur) if fits else []
 
+    def removable(self, model: LoopModel, effect: str, added: dict) -> bool:
+        """Whether the backward step may test ``model`` without ``effect``: the loop added it, its addition
+        left the system gain and the measured dark variance as they were (deleting it undoes it), no effect
+        left in the model is refitted after it (``refit_after``) or needs it first (``prerequisite``)."""
+        if not added.get(effect):
+            return False
+        rest = model.without_effect(effect)
+        return not any(effect in card_for(n).refit_after or card_for(n).prerequisite(self.g.fit_data, rest) == effect
+                       for n in rest.effects)
+
+    def _backward(self, model: LoopModel, held_cur: dict, added: dict, last: set, res: GroupResult) -> tuple:
+        """The backward step (module docstring, step 6): each effect the loop added (:meth:`removable`) is
+        held out of the final model in turn and the model without it scored on the held-out replicates
+        against the model with it (common random numbers, as a candidate is); the one whose keeping gains
+        least is taken out when that gain does not beat its sampling noise
+        (:func:`attribution.gain_beats`), the held-out error does not grow without it (:func:`error_grew`)
+        and it breaks no statistic (:meth:`_broken`); repeated until every effect left earns its keep.
+        An effect added early can be superseded by a later one that explains the same residual better: a
+        heavy-tailed read noise taken for the dark tail that random telegraph pixels make, while the
+        telegraph pixels' own candidate was refuted by a dark level the model did not yet have. The effects
+        of the last addition are not tested in the first round (they have just been scored against the
+        model without them). Returns (model, its held-out dict, whether anything was taken out); every
+        test is appended to ``res.backward``."""
+        R = self.cfg.heldout_replicates
+        changed, skip = False, set(last)
+        while len(model.effects) >= 2:
+            trials = []
+            for name in model.effects:
+                if name in skip or not self.removable(model, name, added):
+                    continue
+                rest = model.without_effect(name)
+                run = HeldOut(self, rest, tuple(self.applicable), f"- {name}").extend(R)
+                rec = {"effect": name, "parameters": model.effects[name].to_dict()}
+                self._score(rec, run, held_cur)
+                rec.pop("_beats")
+                held = run.result()
+                keep, sd = -rec.pop("heldout_gain"), rec.pop("heldout_gain_sd")
+                rec.update({"keep_gain": keep, "keep_gain_sd": sd, "replicates": rec["replicates"],
+                            "kl_structured_with": held_cur["kl_structured"],
+                            "kl_structured_without": held["kl_structured"]})
+                rec["moved_most"] = [{"diagnostic": m["diagnostic"], "gain": -m["gain"]} for m in rec["moved_most"]]
+                worse, broken = error_grew(held, held_cur, self.cfg.kl_tolerance), self._broken(held, held_cur)
+                if worse:
+                    rec["error_grew_without"] = worse
+                if broken:
+                    rec["breaks_without"] = broken
+                rec["removed"] = False
+                trials.append((rec, rest, held, not gain_beats(keep, sd) and not worse and not broken))
+            skip = set()
+            if not trials:
+                break
+            res.backward.extend(t[0] for t in trials)
+            out = [t for t in trials if t[3]]
+            if not out:
+                break
+            rec, model, held_cur, _ = min(out, key=lambda t: t[0]["keep_gain"])
+            rec["removed"] = True
+            changed = True
+        return model, held_cur, changed
+
     def _floor_map(self) -> dict:
         return {n: self.held_floor(n) for n in self.applicable}
 
@@ -775,6 +836,8 @@ class Loop:
         discs = self.evaluate(model, tag, held_cur)
         res.base_disc = discs
         excluded: set[str] = set()  # unexplained for good
+        added: dict[str, bool] = {}  # effect the loop added -> whether the backward step may take it out
+        last: set[str] = set()  # the effects of the last addition
         unmodelled: set[str] = set()  # significant, and no effect of the vocabulary explains them
         res.heldout_base = _summary(held_cur)
         res.plots["hist_base"] = (held_cur["real_noise"], held_cur["model_noise"])
@@ -896,6 +959,13 @@ class Loop:
                  held["model_noise"]))
             res.iterations.extend(recs)
             if accepted:
+                # effects whose addition left the system gain and the measured dark variance as they were can
+                # be taken out again by deleting them (the backward step); the others re-measured those
+                same = cand.K == model.K and cand.var_dark_dn2 == model.var_dark_dn2
+                for n in cand.effects:
+                    if n not in model.effects:
+                        added[n] = same
+                last = {n for n in cand.effects if n not in model.effects}
                 model, discs, held_cur = cand, new_discs, held
                 continue
             # no candidate beats the current model: every proposing diagnostic stays unexplained
@@ -910,6 +980,10 @@ class Loop:
             for ds in proposals.values():
                 for d in ds:
                     unexplained(d, f"no candidate beat the current model on held-out frames ({listed})")
+        if added:
+            model, held_cur, changed = self._backward(model, held_cur, added, last, res)
+            if changed:
+                discs = self.evaluate(model, tag + 1, held_cur)
         res.model = model
         res.final = discs
         res.heldout_final = _summary(held_cur)

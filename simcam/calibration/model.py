@@ -69,6 +69,14 @@ class LoopModel:
         m.refit_read()
         return m
 
+    def without_effect(self, name: str) -> "LoopModel":
+        """The inverse of :meth:`with_effect`: ``name`` deleted and the read noise refitted (it takes back
+        the temporal dark variance the effect held)."""
+        m = self.copy()
+        del m.effects[name]
+        m.refit_read()
+        return m
+
     def cards(self) -> list[tuple[EffectCard, EffectParams]]:
         """(card, parameters) of the model's effects, in signal-chain order."""
         return [(c, self.effects[name]) for name, c in CARDS.items() if name in self.effects]

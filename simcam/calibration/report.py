@@ -113,6 +113,7 @@ def build_report(results: list[GroupResult], capture, cfg: LoopConfig, emva: dic
             "analysed": r.plots["group"].region,
             "bootstrap_null": r.bootstrap_null,
             "iterations": [{k: v for k, v in it.items()} for it in r.iterations],
+            "backward": [dict(b) for b in r.backward],
             "effects": list(r.model.effects),
             "unexplained": [{"diagnostic": u["diagnostic"], "discrepancy": u["discrepancy"], "reason": u["reason"]}
                             for u in r.unexplained],
@@ -639,6 +640,7 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
                          f"<td class=l>{html.escape(format_parameters(it['effect'], it['parameters']))}</td></tr>")
         parts.append("</table>")
         parts.append(_candidates_table(g["iterations"]))
+        parts.append(_backward_table(g.get("backward") or []))
         if g["unexplained"]:
             parts.append("<h3>Unexplained</h3><ul>" + "".join(
                 f"<li>{u['diagnostic']}: z = {_fmt(u['discrepancy'])} ({html.escape(u['reason'])})</li>"
@@ -665,6 +667,29 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
                              f"src='data:image/png;base64,{figs[iso][key]}'>")
     parts.append("</body></html>")
     Path(path).write_text("\n".join(parts))
+
+
+def _backward_table(tests: list[dict]) -> str:
+    """The backward step's tests: each added effect left out of the final model in turn, the held-out gain
+    of keeping it, and whether it was taken out (:meth:`simcam.calibration.loop.Loop._backward`)."""
+    if not tests:
+        return ""
+    rows = ["<h3>Backward step (held-out synthetic log-likelihood gain of keeping each added effect)</h3>"
+            "<table><tr><th>effect</th><th>gain of keeping it (nats)</th><th>± SD</th><th>replicates</th>"
+            "<th>statistics that moved most</th><th>structured KL with</th><th>structured KL without</th>"
+            "<th>taken out</th></tr>"]
+    for b in tests:
+        moved = ", ".join(f"{m['diagnostic']} {m['gain']:+.3g}" for m in b["moved_most"])
+        why = ("yes" if b["removed"] else
+               f"no (without it the held-out error grows: {html.escape(b['error_grew_without'])})"
+               if b.get("error_grew_without") else
+               "no (without it a statistic breaks: " + html.escape(", ".join(x["diagnostic"] for x in b["breaks_without"]))
+               + ")" if b.get("breaks_without") else "no")
+        rows.append(f"<tr><td class=l>{html.escape(b['effect'])}</td><td>{b['keep_gain']:.3g}</td>"
+                    f"<td>{b['keep_gain_sd']:.2g}</td><td>{b['replicates']}</td><td class=l>{html.escape(moved)}</td>"
+                    f"<td>{_fmt(b['kl_structured_with'])}</td><td>{_fmt(b['kl_structured_without'])}</td>"
+                    f"<td class=l>{why}</td></tr>")
+    return "".join(rows) + "</table>"
 
 
 def _candidates_table(iterations: list[dict]) -> str:
