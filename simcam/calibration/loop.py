@@ -49,6 +49,16 @@ Per ISO group of a capture set:
    When nothing beats the current model, the proposing diagnostics are ``unexplained`` with the
    candidates' scores as the reason, and the loop stops (also when nothing significant is left, or
    after ``max_iterations``).
+6. Backward step (:meth:`Loop._backward`; stepwise selection with a backward step, M. A. Efroymson,
+   "Multiple regression analysis", in *Mathematical Methods for Digital Computers*, Wiley, 1960): an
+   effect added early can be superseded by one added later that explains the same residual better.
+   Each effect the loop added is left out of the final model in turn, and the model without it is
+   scored against the model with it as a candidate is (same held-out replicates, same statistics);
+   the one whose keeping gains least is taken out when that gain does not beat its sampling noise (the
+   rule a candidate must pass to enter) and the model without it neither grows the held-out error nor
+   breaks a statistic; repeated until every effect left earns its keep. Effects whose addition
+   re-measured the system gain or the dark variance, and those another effect needs (a prerequisite) or
+   is refitted after, stay.
 
 Cost. Every replicate (a simulated capture reduced to its statistics) is drawn from its own stream,
 ``(seed, iso, purpose, ..., r)``, and replicates run on ``threads`` threads (numpy and the noise
