@@ -55,9 +55,10 @@ ALIASES = {"stuck_pixels": "dead_pixels"}
 def judge(truth_effects: set[str], report: dict) -> dict:
     """Compare one loop report with the generator's truth (see the module docstring)."""
     named = set()
-    unexplained, kl_rows, added = set(), [], {}
+    unexplained, kl_rows, added, taken_out = set(), [], {}, []
     for g in report["isos"]:
         added[g["iso_label"]] = list(g["effects"])
+        taken_out += [f"{g['iso_label']} {b['effect']}" for b in g.get("backward", []) if b["removed"]]
         named |= {e for e in g["effects"] if not e.startswith("empirical_")}
         unexplained |= {u["diagnostic"] for u in g["unexplained"]}
         h = g["heldout"]
@@ -75,7 +76,7 @@ def judge(truth_effects: set[str], report: dict) -> dict:
         if added and b > 0.05 and f > 0.2 * b:
             low_drop.append(f"{label} {b:.3g}->{f:.3g}")
     return {"named": sorted(named), "added": added, "missed": missed, "wrong": wrong, "unexplained": sorted(unexplained),
-            "kl": kl_rows, "kl_grew": grew, "kl_drop_below_80": low_drop,
+            "kl": kl_rows, "kl_grew": grew, "kl_drop_below_80": low_drop, "taken_out": taken_out,
             "ok": not missed and not wrong and not grew}
 
 
@@ -132,7 +133,8 @@ def main(argv=None) -> int:
                 print(f"{c['name']:52s} {'yes' if c['held_out'] else 'no':4s} {','.join(r['truth']) or '-':34s} "
                       f"{','.join(r['named']) or '-':34s} {','.join(r['wrong']) or '-':20s} "
                       f"{','.join(r['missed']) or '-':16s} {'yes' if r['ok'] else 'NO':4s} {r['seconds']:.0f}"
-                      + (f"  KL grew: {'; '.join(r['kl_grew'])}" if r["kl_grew"] else ""))
+                      + (f"  KL grew: {'; '.join(r['kl_grew'])}" if r["kl_grew"] else "")
+                      + (f"  taken out: {'; '.join(r['taken_out'])}" if r["taken_out"] else ""))
             sys.stdout.flush()
     for label, sel in (("developed", [r for r in results if not r["held_out"]]),
                        ("held out", [r for r in results if r["held_out"]])):
@@ -143,7 +145,8 @@ def main(argv=None) -> int:
               f"wrong additions {sum(len(r.get('wrong', [])) for r in sel)}; missed vocabulary effects "
               f"{sum(len(r.get('missed', [])) for r in sel)}; structured KL grew in "
               f"{sum(bool(r.get('kl_grew')) for r in sel)} cases; drop < 80 % where added in "
-              f"{sum(bool(r.get('kl_drop_below_80')) for r in sel)} cases")
+              f"{sum(bool(r.get('kl_drop_below_80')) for r in sel)} cases; effects taken out by the backward step "
+              f"{sum(len(r.get('taken_out', [])) for r in sel)}")
     if args.json:
         args.json.write_text(json.dumps(results, indent=1, default=str))
     return 0

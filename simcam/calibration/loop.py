@@ -803,8 +803,7 @@ class Loop:
                 rec.pop("_beats")
                 held = run.result()
                 keep, sd = -rec.pop("heldout_gain"), rec.pop("heldout_gain_sd")
-                rec.update({"keep_gain": keep, "keep_gain_sd": sd, "replicates": rec["replicates"],
-                            "kl_structured_with": held_cur["kl_structured"],
+                rec.update({"keep_gain": keep, "keep_gain_sd": sd, "kl_structured_with": held_cur["kl_structured"],
                             "kl_structured_without": held["kl_structured"]})
                 rec["moved_most"] = [{"diagnostic": m["diagnostic"], "gain": -m["gain"]} for m in rec["moved_most"]]
                 worse, broken = error_grew(held, held_cur, self.cfg.kl_tolerance), self._broken(held, held_cur)
@@ -847,7 +846,7 @@ class Loop:
         res.base_disc = discs
         excluded: set[str] = set()  # unexplained for good
         added: dict[str, bool] = {}  # effect the loop added -> whether the backward step may take it out
-        last: set[str] = set()  # the effects of the last addition
+        last_added: set[str] = set()  # the effects of the last addition
         unmodelled: set[str] = set()  # significant, and no effect of the vocabulary explains them
         res.heldout_base = _summary(held_cur)
         res.plots["hist_base"] = (held_cur["real_noise"], held_cur["model_noise"])
@@ -975,7 +974,7 @@ class Loop:
                 for n in cand.effects:
                     if n not in model.effects:
                         added[n] = same
-                last = {n for n in cand.effects if n not in model.effects}
+                last_added = {n for n in cand.effects if n not in model.effects}
                 model, discs, held_cur = cand, new_discs, held
                 continue
             # no candidate beats the current model: every proposing diagnostic stays unexplained
@@ -991,15 +990,20 @@ class Loop:
                 for d in ds:
                     unexplained(d, f"no candidate beat the current model on held-out frames ({listed})")
         if added:
-            model, held_cur, changed = self._backward(model, held_cur, added, last, res)
+            model, held_cur, changed = self._backward(model, held_cur, added, last_added, res)
             if changed:
                 discs = self.evaluate(model, tag + 1, held_cur)
         res.model = model
         res.final = discs
         res.heldout_final = _summary(held_cur)
         listed = {u["diagnostic"] for u in res.unexplained}
+        taken = {b["effect"]: b for b in res.backward if b["removed"]}
         for d in discs:
-            if d.significant and d.name not in listed:
+            b = taken.get(effect_for(d.name))
+            if d.significant and b is not None:  # its effect was added, then taken out
+                unexplained(d, f"{b['effect']} was taken out by the backward step: keeping it beside the others "
+                               f"gained {b['keep_gain']:.3g} ± {b['keep_gain_sd']:.2g} nats on held-out frames")
+            elif d.significant and d.name not in listed:
                 res.unexplained.append({"diagnostic": d.name, "discrepancy": d.z,
                                         "reason": "still significant when the loop stopped"})
         # keep only those still significant under the final model
