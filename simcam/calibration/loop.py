@@ -790,15 +790,15 @@ class Loop:
         model without them). Returns (model, its held-out dict, whether anything was taken out); every
         test is appended to ``res.backward``."""
         R = self.cfg.heldout_replicates
-        changed, skip = False, set(last)
+        changed, skip, rnd = False, set(last), 0
         while len(model.effects) >= 2:
-            trials = []
+            trials, rnd = [], rnd + 1
             for name in model.effects:
                 if name in skip or not self.removable(model, name, added):
                     continue
                 rest = model.without_effect(name)
                 run = HeldOut(self, rest, tuple(self.applicable), f"- {name}").extend(R)
-                rec = {"effect": name, "parameters": model.effects[name].to_dict()}
+                rec = {"effect": name, "round": rnd, "parameters": model.effects[name].to_dict()}
                 self._score(rec, run, held_cur)
                 rec.pop("_beats")
                 held = run.result()
@@ -811,8 +811,8 @@ class Loop:
                     rec["error_grew_without"] = worse
                 if broken:
                     rec["breaks_without"] = broken
-                rec["removed"] = False
-                trials.append((rec, rest, held, not gain_beats(keep, sd) and not worse and not broken))
+                rec["removed"], rec["earns_keep"] = False, gain_beats(keep, sd)
+                trials.append((rec, rest, held, not rec["earns_keep"] and not worse and not broken))
             skip = set()
             if not trials:
                 break

@@ -620,6 +620,7 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
                      "<th>pixel KL after</th><th>KL excess before</th><th>KL excess after</th>"
                      "<th>structured KL before</th><th>structured KL after</th><th>NLL before</th><th>NLL after</th>"
                      "<th>kept</th><th>parameters</th></tr>")
+        taken_out = {b["effect"] for b in g.get("backward") or [] if b["removed"]}
         for i, it in enumerate(g["iterations"], 1):
             h = it["heldout"]
             label = it["effect"] + (f" <i>(empirical, not in the vocabulary: {html.escape(it['not_in_vocabulary'])})</i>"
@@ -629,6 +630,8 @@ def write_html(path: Path, doc: dict, figs: dict[int, dict]) -> None:
                           f"{html.escape(it.get('joint_why', ''))})</i>")
             label += "".join(f"<br><i>{html.escape(n)} removed: {html.escape(why)}</i>"
                              for n, why in (it.get("removed") or {}).items())
+            if it["accepted"] and it["effect"] in taken_out:
+                label += " <i>(taken out by the backward step)</i>"
             parts.append(f"<tr><td>{i}</td><td class=l>{label}</td><td class=l>{it['diagnostic']}</td>"
                          f"<td>{_fmt(it['discrepancy_before'])}</td><td>{_fmt(it['discrepancy_after'])}</td>"
                          f"<td>{_fmt(h['discrepancy_before'])}</td><td>{_fmt(h['discrepancy_after'])}</td>"
@@ -675,17 +678,18 @@ def _backward_table(tests: list[dict]) -> str:
     if not tests:
         return ""
     rows = ["<h3>Backward step (held-out synthetic log-likelihood gain of keeping each added effect)</h3>"
-            "<table><tr><th>effect</th><th>gain of keeping it (nats)</th><th>± SD</th><th>replicates</th>"
+            "<table><tr><th>round</th><th>effect</th><th>gain of keeping it (nats)</th><th>± SD</th><th>replicates</th>"
             "<th>statistics that moved most</th><th>structured KL with</th><th>structured KL without</th>"
             "<th>taken out</th></tr>"]
     for b in tests:
         moved = ", ".join(f"{m['diagnostic']} {m['gain']:+.3g}" for m in b["moved_most"])
-        why = ("yes" if b["removed"] else
-               f"no (without it the held-out error grows: {html.escape(b['error_grew_without'])})"
+        why = ("yes: keeping it does not beat its noise" if b["removed"] else
+               "no: keeping it beats its noise" if b.get("earns_keep") else
+               f"no: without it the held-out error grows ({html.escape(b['error_grew_without'])})"
                if b.get("error_grew_without") else
-               "no (without it a statistic breaks: " + html.escape(", ".join(x["diagnostic"] for x in b["breaks_without"]))
-               + ")" if b.get("breaks_without") else "no")
-        rows.append(f"<tr><td class=l>{html.escape(b['effect'])}</td><td>{b['keep_gain']:.3g}</td>"
+               "no: without it a statistic breaks (" + html.escape(", ".join(x["diagnostic"] for x in b["breaks_without"]))
+               + ")" if b.get("breaks_without") else "no: another effect kept less")
+        rows.append(f"<tr><td>{b.get('round', '')}</td><td class=l>{html.escape(b['effect'])}</td><td>{b['keep_gain']:.3g}</td>"
                     f"<td>{b['keep_gain_sd']:.2g}</td><td>{b['replicates']}</td><td class=l>{html.escape(moved)}</td>"
                     f"<td>{_fmt(b['kl_structured_with'])}</td><td>{_fmt(b['kl_structured_without'])}</td>"
                     f"<td class=l>{why}</td></tr>")

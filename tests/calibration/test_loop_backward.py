@@ -83,3 +83,18 @@ def test_effects_that_earn_their_keep_stay():
     assert {b["effect"] for b in res.backward} == {"rtn", "dsnu"}
     for b in res.backward:
         assert not b["removed"] and b["keep_gain"] > 2 * b["keep_gain_sd"], b
+
+
+def test_the_report_lists_every_test(loop):
+    from simcam.calibration.report import _backward_table
+
+    model = _rtn_model(loop).with_effect("heavy_tail_read", {"lam": -0.1})
+    res = GroupResult(800, model, model)
+    loop._backward(model, loop.heldout(model, tuple(loop.applicable)), {"rtn": True, "heavy_tail_read": True},
+                   set(), res)
+    page = _backward_table(res.backward)
+    assert page.count("<tr>") == 1 + len(res.backward)
+    # beside the heavy tail the telegraph pixels' keeping gain is within its noise, but without them the
+    # held-out error grows and telegraph_pixels breaks: they stay
+    assert "yes: keeping it does not beat its noise" in page and "no: without it the held-out error grows" in page
+    assert all(b["round"] == 1 for b in res.backward)
