@@ -787,9 +787,12 @@ class Loop:
         heavy-tailed read noise taken for the dark tail that random telegraph pixels make, while the
         telegraph pixels' own candidate was refuted by a dark level the model did not yet have. The effects
         of the last addition are not tested in the first round (they have just been scored against the
-        model without them). Returns (model, its held-out dict, whether anything was taken out); every
+        model without them). Each test runs in the race's stages (:data:`RACE_STAGES` replicates, then
+        all): one whose keeping gain is :data:`RACE_Z` SEs beyond :data:`attribution.MIN_GAIN` after a
+        stage stops there (it stays). Returns (model, its held-out dict, whether anything was taken out); every
         test is appended to ``res.backward``."""
         R = self.cfg.heldout_replicates
+        stages = sorted({min(s, R) for s in RACE_STAGES} | {R})
         changed, skip, rnd = False, set(last), 0
         while len(model.effects) >= 2:
             trials, rnd = [], rnd + 1
@@ -797,15 +800,23 @@ class Loop:
                 if name in skip or not self.removable(model, name, added):
                     continue
                 rest = model.without_effect(name)
-                run = HeldOut(self, rest, tuple(self.applicable), f"- {name}").extend(R)
+                run = HeldOut(self, rest, tuple(self.applicable), f"- {name}")
                 rec = {"effect": name, "round": rnd, "parameters": model.effects[name].to_dict()}
-                self._score(rec, run, held_cur)
+                for n in stages:  # in the race's stages: one that clearly earns its keep stops early
+                    self._score(rec, run.extend(n), held_cur)
+                    clear = -rec["heldout_gain"] > MIN_GAIN + RACE_Z * max(rec["heldout_gain_sd"], RACE_SE_FLOOR)
+                    if clear:
+                        break
                 rec.pop("_beats")
                 held = run.result()
                 keep, sd = -rec.pop("heldout_gain"), rec.pop("heldout_gain_sd")
                 rec.update({"keep_gain": keep, "keep_gain_sd": sd, "kl_structured_with": held_cur["kl_structured"],
                             "kl_structured_without": held["kl_structured"]})
                 rec["moved_most"] = [{"diagnostic": m["diagnostic"], "gain": -m["gain"]} for m in rec["moved_most"]]
+                if clear:
+                    rec.update(removed=False, earns_keep=True)
+                    trials.append((rec, rest, held, False))
+                    continue
                 worse, broken = error_grew(held, held_cur, self.cfg.kl_tolerance), self._broken(held, held_cur)
                 if worse:
                     rec["error_grew_without"] = worse
