@@ -56,7 +56,8 @@ Per ISO group of a capture set:
    scored against the model with it as a candidate is (same held-out replicates, same statistics);
    the one whose keeping gains least is taken out when that gain does not beat its sampling noise (the
    rule a candidate must pass to enter) and the model without it neither grows the held-out error nor
-   breaks a statistic; repeated until every effect left earns its keep. Effects whose addition
+   breaks a statistic; repeated until every effect left earns its keep (the others keep their fitted
+   parameters, the read noise takes back the variance a removed effect held). Effects whose addition
    re-measured the system gain or the dark variance, and those another effect needs (a prerequisite) or
    is refitted after, stay.
 
