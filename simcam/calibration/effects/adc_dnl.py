@@ -52,6 +52,15 @@ CODE_LATTICE_RATIO = 1.5
 WIDTH_VARIANCE_PER_SIGMA2 = 219.0 / 49.0
 
 
+def coarser_codes(d, model) -> float | None:
+    """The data's code spacing (``adc_step``, DN) where it exceeds the model's codes by more than
+    :data:`CODE_LATTICE_RATIO` (the coarse step not yet modelled), else None."""
+    from .. import diagnostics as dg
+
+    step = dg.adc_step(d)
+    return step if step > CODE_LATTICE_RATIO * float(model.q) else None
+
+
 class AdcDnl(EffectParams):
     dnl_sigma: float = quantity("LSB", "standard deviation of the ADC's transition offsets (LSB; DNL std = "
                                 "sqrt(2) times it)")
@@ -63,10 +72,8 @@ class AdcDnlCard(EffectCard, name="adc_dnl", params=AdcDnl, diagnostics=("code_w
                  null_field="dnl_sigma"):
 
     def fit(self, d, model, ctx):
-        from .. import diagnostics as dg
-
-        step = dg.adc_step(d)
-        if step > CODE_LATTICE_RATIO * float(model.q):  # the step first (module docstring)
+        step = coarser_codes(d, model)
+        if step is not None:  # the step first (module docstring)
             return AdcDnl(dnl_sigma=0.0, coarser_codes_dn=step)
         excess = float(ctx.value) - float(ctx.sim_mean)
         if not math.isfinite(excess) or excess <= 0:
@@ -75,9 +82,7 @@ class AdcDnlCard(EffectCard, name="adc_dnl", params=AdcDnl, diagnostics=("code_w
 
     def prerequisite(self, d, model):
         """``quantization`` while the data's codes are coarser than the model's (module docstring)."""
-        from .. import diagnostics as dg
-
-        if "quantization" in model.effects or dg.adc_step(d) <= CODE_LATTICE_RATIO * float(model.q):
+        if "quantization" in model.effects or coarser_codes(d, model) is None:
             return None
         return "quantization"
 
