@@ -11,7 +11,10 @@ Three jobs, each run five ways in the same process tree, one after the other:
   to its close, the fork server's start and imports included).
 
 Jobs: ``render`` (N renders of a synthetic 12 MP DNG -> 8-bit PNG, pipeline srgb), ``synth``
-(a training set of P noisy/clean patches, packed 4 x 32 x 32, from 1 MP clean DNGs, into Zarr),
+(a training set of P noisy/clean patches, packed 4 x 32 x 32, into Zarr: 20 from each of P / 20 clean
+1 MP DNGs, the shape of a denoising set cut from thousands of raws; 100 distinct files, the others
+hard links to them), ``synth-few`` (the same P patches, 250 from each of P / 250 sources: few long
+items, where the dask runs' fixed cost weighs most),
 ``gt`` (ground truth of B bursts of 16 frames of 1 MP). Every configuration writes fresh
 outputs; the outputs of all five are checked byte-identical (PNG, Zarr chunks, npz).
 Prints the CPU model, thread settings and load average, wall times, the speed-up of 2 workers
@@ -138,12 +141,14 @@ def main(argv=None) -> int:
     ap.add_argument("--renders", type=int, default=64)
     ap.add_argument("--size", default="4000x3000", help="render DNG width x height")
     ap.add_argument("--patches", type=int, default=20000)
+    ap.add_argument("--per-source", type=int, default=20,
+                    help="synth: patches cropped from each source (synth-few: 250 from each of patches/250 sources)")
     ap.add_argument("--synth-size", default="1024x1024",
                     help="synth source DNG width x height (4000x3000: camera-sized raws, the noise drawn over 12 MP per item)")
-    ap.add_argument("--synth-distinct", type=int, default=0,
+    ap.add_argument("--synth-distinct", type=int, default=100,
                     help="distinct synth source files (the others hard links to them; 0: all distinct)")
     ap.add_argument("--bursts", type=int, default=8)
-    ap.add_argument("--jobs", default="render,synth,gt")
+    ap.add_argument("--jobs", default="render,synth,synth-few,gt")
     ap.add_argument("--workdir", default=None)
     ap.add_argument("--repeats", type=int, default=1, help="rounds of all five configurations; medians reported")
     args = ap.parse_args(argv)
@@ -174,16 +179,18 @@ def main(argv=None) -> int:
         rows.append(bench("render", f"{args.renders} renders of a {w}x{h} DNG -> PNG", render_job, work, lambda out: [
             Task(str(d), {"input": str(d), "output": str(out / f"{d.stem}.png"), "pipeline": doc, "seed": 0,
                           "index": i}) for i, d in enumerate(dngs)], lambda out: [out], args.repeats))
-    if "synth" in jobs:
-        per = 250 if not args.quick else 50
+    for name, per in (("synth", args.per_source), ("synth-few", 250)):
+        if name not in jobs:
+            continue
+        per = per if not args.quick else 50
         n_src = max(1, args.patches // per)
         sw, sh = (int(v) for v in args.synth_size.split("x"))
         if args.quick:
             sw, sh = 1024, 768
-        distinct = args.synth_distinct or n_src
+        distinct = min(n_src, args.synth_distinct or n_src)
         srcs = []
         for i in range(n_src):
-            p = work / f"synth_in_{sw}x{sh}" / f"clean{i:03d}.dng"
+            p = work / f"synth_in_{sw}x{sh}" / f"clean{i:04d}.dng"
             p.parent.mkdir(exist_ok=True)
             if not p.exists():
                 if i < distinct:
@@ -193,7 +200,7 @@ def main(argv=None) -> int:
             srcs.append(p)
         from simcam.trainingset import create_store
 
-        def synth_tasks(out):
+        def synth_tasks(out, srcs=srcs, per=per):
             store = out / "set.zarr"
             create_store(str(store), sources=[str(s) for s in srcs], patches=per, patch_size=64, overwrite=True)
             base = {"seed": 1, "profile": str(PROFILE), "isos": [100, 800, 1600], "camera": None,
@@ -202,9 +209,9 @@ def main(argv=None) -> int:
             return [Task(str(s), {**base, "source": str(s), "index": i}) for i, s in enumerate(srcs)]
 
         mp = sw * sh / 1e6
-        rows.append(bench("synth", f"{n_src * per} patches (4x32x32) from {n_src} {mp:.0f} MP DNGs -> Zarr",
-                          synth_patches_job, work, synth_tasks, lambda out: [out / "set.zarr"],
-                          args.repeats))
+        shared = f", {distinct} distinct" if distinct < n_src else ""
+        rows.append(bench(name, f"{n_src * per} patches (4x32x32), {per} from each of {n_src} {mp:.0f} MP DNGs{shared} "
+                          "-> Zarr", synth_patches_job, work, synth_tasks, lambda out: [out / "set.zarr"], args.repeats))
     if "gt" in jobs:
         from simcam.io.dng import read_dng
         from simcam.synth import synth

@@ -226,3 +226,31 @@ def test_job_preload_covers_what_its_first_item_imports(job, inputs, tmp_path):
                        text=True, cwd=REPO)
     assert r.returncode == 0, r.stderr[-2000:]
     assert json.loads(r.stdout.strip().splitlines()[-1]) == []
+
+
+def test_many_items_run_in_chunks_and_fail_one_by_one(tmp_path):
+    """More items than ``TASKS_PER_SLOT`` per worker thread go to dask in chunks (one task runs several
+    items: a task costs the client ~4 ms of CPU); each item still has its own outcome, in task order, and a
+    failing item fails alone — its chunk-mates complete and its partial output is removed."""
+    from simcam.batch import TASKS_PER_SLOT, BatchConfig, Task, chunks, run_batch
+
+    def job(payload):  # pickled by value to the workers
+        import os
+        from pathlib import Path
+
+        Path(payload["out"]).write_text(str(payload["i"]))
+        if payload["i"] == 77:
+            raise ValueError("item 77 is bad")
+        return {"i": payload["i"], "pid": os.getpid()}
+
+    n = 5 * TASKS_PER_SLOT
+    tasks = [Task(f"item{i}", {"i": i, "out": str(tmp_path / f"{i}.txt")}, outputs=(str(tmp_path / f"{i}.txt"),))
+             for i in range(n)]
+    assert len(chunks(range(n), 2)) == 2 * TASKS_PER_SLOT < n
+    out = run_batch(job, tasks, BatchConfig(workers=2, progress=False), echo=lambda s: None)
+    assert [o.key for o in out] == [t.key for t in tasks]
+    assert [o.ok for o in out] == [i != 77 for i in range(n)]
+    assert out[77].error == "ValueError: item 77 is bad"
+    assert [o.info["i"] for o in out if o.ok] == [i for i in range(n) if i != 77]
+    assert len({o.info["pid"] for o in out if o.ok}) == 2  # both workers took chunks
+    assert not (tmp_path / "77.txt").exists() and (tmp_path / "76.txt").read_text() == "76"
