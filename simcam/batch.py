@@ -13,7 +13,10 @@ writers write then rename). ``run_batch``
 * shows a progress bar on the client (on a terminal) and prints the dashboard address;
 * collects per-item failures (one line each) while the other items complete; a failed item
   leaves none of its outputs behind;
-* with ``resume=True`` skips the items whose outputs all exist.
+* with ``resume=True`` skips the items whose outputs all exist;
+* hands dask the items one by one while there are at most ``TASKS_PER_SLOT`` (32) per worker thread,
+  else in consecutive chunks, one task each (:func:`chunks`): a dask task costs the client process
+  (scheduler, result fetch) a few milliseconds of CPU, which two busy workers on two cores pay for.
 
 Determinism is the job's: item *i* draws from ``SeedSequence([seed, i])`` (the commands put the
 seed in the payload), so the bytes written do not depend on the worker count, the scheduler or
