@@ -4,7 +4,8 @@ Steps (Abdelhamed 2020, fig. 5.4): defective-pixel correction (5.3.1), frame out
 and intensity alignment (5.3.2, eq. 5.4), reference choice (eq. 5.5) and dense
 local alignment (5.3.3), robust per-pixel mean (5.3.4, eq. 5.6-5.12).
 
-Memory: one input frame at a time; the working frames live in a
+Memory: two input frames at a time (pass A reads the next frame on a second thread while it sums
+one: :func:`_prefetched`); the working frames live in a
 :class:`FrameStore` (RAM when they fit ``memory_budget_bytes``, else a scratch
 file), and the robust mean runs on row tiles of ``tile_pixels`` pixels. The
 result does not depend on the tiling (every estimator is per pixel).
@@ -212,6 +213,23 @@ def _close(bar) -> None:
         bar.close()
 
 
+def _prefetched(burst: Burst, n: int):
+    """``burst.load(i)`` for i < n, in order, each frame read on a second thread while the caller works on
+    the one before (a DNG's decode releases the GIL). Pass A's sums stay in frame order, so the result is
+    the same bytes; a frame that fails to load raises when its turn comes, as a plain loop would."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    if n == 0:
+        return
+    with ThreadPoolExecutor(1, thread_name_prefix="simcam-gt-load") as ex:
+        ahead = ex.submit(burst.load, 0)
+        for i in range(n):
+            x = ahead.result()
+            if i + 1 < n:
+                ahead = ex.submit(burst.load, i + 1)
+            yield x
+
+
 def stream_mean(burst: Burst, shape: tuple[int, int] | None = None, what: str = "dark") -> np.ndarray:
     """Mean image of a burst (float32), one frame at a time; checks the size against ``shape``.
 
@@ -328,8 +346,7 @@ def _run(burst, cfg, store, shape, cfa, lo, hi, dmap, dmask, timing, t0, progres
     acc_scaled = np.zeros(shape, dtype=np.float64) if cfg.intensity == "multiplicative" else None
     any_nan = False
     bar = _bar(progress, N, "gt: load")
-    for i in range(N):
-        x = burst.load(i)
+    for i, x in enumerate(_prefetched(burst, N)):
         if dmap is not None and dmask.any():
             x = correct_defects(x, dmask, cfa)
         nan = np.isnan(x)
@@ -379,10 +396,13 @@ def _run(burst, cfg, store, shape, cfa, lo, hi, dmap, dmask, timing, t0, progres
     t = time.perf_counter()
     dist = np.full(N, np.inf)
     bar = _bar(progress, kept.size, "gt: reference")
-    for i in kept:
+
+    def distance(i):  # frames on threads (numpy releases the GIL); each its own entry of dist
         d = aligned(i) - x_a
         dist[i] = float(np.sqrt(np.nansum(d.astype(np.float64) ** 2)))
         _tick(bar)
+
+    map_threads(distance, [int(i) for i in kept])
     _close(bar)
     ref_idx = int(np.argmin(dist))
     timing["reference"] = time.perf_counter() - t

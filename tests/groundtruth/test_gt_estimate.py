@@ -211,3 +211,29 @@ def test_same_bytes_for_any_thread_count(synth, tmp_path, monkeypatch):
         rep = {k: v for k, v in g.report.items() if k != "timing_s"}
         outs.append((g.gt.tobytes(), g.sigma.tobytes(), g.n_used.tobytes(), json.dumps(rep, sort_keys=True)))
     assert outs[1] == outs[0] and outs[2] == outs[0]
+
+
+def test_pass_a_reads_the_next_frame_ahead_in_order_and_fails_at_the_bad_frame():
+    """Pass A reads frame i + 1 on a second thread while frame i is summed (a DNG decode releases the GIL);
+    the frames still come in order, and a frame that cannot be read fails when its turn comes, after the
+    frames before it were used."""
+    import threading
+
+    from simcam.groundtruth.estimate import _prefetched
+
+    readers = set()
+
+    class Frames:
+        def load(self, i):
+            readers.add(threading.current_thread().name)
+            if i == 3:
+                raise DatasetError("frame_003.dng: truncated")
+            return np.full((2, 2), float(i))
+
+    got = []
+    with pytest.raises(DatasetError, match="frame_003"):
+        for x in _prefetched(Frames(), 6):
+            got.append(float(x[0, 0]))
+    assert got == [0.0, 1.0, 2.0]
+    assert readers and all(n.startswith("simcam-gt-load") for n in readers)
+    assert list(_prefetched(Frames(), 0)) == []
