@@ -166,7 +166,9 @@ def chunks(todo: Sequence[int], slots: int) -> list[list[int]]:
     core, taken from two busy workers on two cores). Chunks keep that share small while the last
     chunks still balance the workers' load to about 1/``TASKS_PER_SLOT`` of a worker's share (dask
     best practices: tasks well above the scheduler's per-task overhead). A chunk's items keep their own
-    outcomes, seeds and outputs, so the bytes written do not depend on the chunking.
+    outcomes, seeds and outputs, so the bytes written do not depend on the chunking; a chunk whose
+    worker died (memory) runs again item by item (:func:`run_batch`), so only the item that kills its
+    worker fails.
 
     Examples
     --------
@@ -334,6 +336,11 @@ def run_batch(job: Callable[[Any], dict], tasks: Sequence[Task], config: BatchCo
             from distributed import as_completed
 
             client, cluster = _client(config, forkserver)
+            from simcam.batch_worker import quiet_logging, restore_logging
+
+            # every item's failure is reported by the batch, one line each (report()); what the scheduler
+            # logs meanwhile (a task whose workers died, a result lost with its worker) says it again
+            former = quiet_logging()
             try:
                 if client.dashboard_link:
                     echo(f"dask dashboard: {client.dashboard_link}")
@@ -341,21 +348,26 @@ def run_batch(job: Callable[[Any], dict], tasks: Sequence[Task], config: BatchCo
                 futures = {client.submit(execute_chunk, job, [tasks[i] for i in group],
                                          key=f"simcam-{label}-{group[0]}-{os.getpid()}", pure=False): group
                            for group in chunks(todo, slots)}
-                for fut in as_completed(futures):
+                running = as_completed(futures)
+                for fut in running:
                     group = futures[fut]
                     try:
                         done = fut.result()
                     except Exception as exc:  # noqa: BLE001 - a worker died (memory) or could not unpickle
+                        if len(group) > 1:  # which item of the chunk it was: each again, as its own task
+                            for i in group:
+                                one = client.submit(execute_chunk, job, [tasks[i]], pure=False,
+                                                    key=f"simcam-{label}-{i}-alone-{os.getpid()}")
+                                futures[one] = [i]
+                                running.add(one)
+                            continue
                         # writers write then rename: a killed worker leaves no partial file
-                        done = [Outcome(tasks[i].key, ok=False, error=f"worker failed: {one_line(exc)}") for i in group]
+                        done = [Outcome(tasks[group[0]].key, ok=False, error=f"worker failed: {one_line(exc)}")]
                     outcomes.update(zip(group, done))
                     bar.update(len(group))
             finally:
                 # the results are in: what distributed logs while it shuts down (a heartbeat that
-                # meets a closed scheduler) is not the user's business
-                from simcam.batch_worker import quiet_logging, restore_logging
-
-                former = quiet_logging()
+                # meets a closed scheduler) is not the user's business either
                 try:
                     client.close()
                     if cluster is not None:

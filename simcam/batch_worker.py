@@ -13,7 +13,8 @@ from __future__ import annotations
 import logging
 
 QUIET_LOGGERS = ("distributed", "distributed.worker", "distributed.core", "distributed.comm",
-                 "distributed.nanny", "distributed.utils_perf", "distributed.worker_memory")
+                 "distributed.nanny", "distributed.utils_perf", "distributed.worker_memory",
+                 "distributed.scheduler", "distributed.client")
 
 
 def quiet_logging(level: int = logging.CRITICAL) -> dict[str, int]:

@@ -254,3 +254,24 @@ def test_many_items_run_in_chunks_and_fail_one_by_one(tmp_path):
     assert [o.info["i"] for o in out if o.ok] == [i for i in range(n) if i != 77]
     assert len({o.info["pid"] for o in out if o.ok}) == 2  # both workers took chunks
     assert not (tmp_path / "77.txt").exists() and (tmp_path / "76.txt").read_text() == "76"
+
+
+def test_a_worker_killed_in_a_chunk_fails_only_that_item(tmp_path):
+    """A worker that dies (here: ``os._exit``, as the kernel's OOM killer would end it) takes its whole chunk
+    with it; the chunk's items then run again one by one, so the item that kills its worker fails with one
+    line and the items beside it succeed."""
+    from simcam.batch import TASKS_PER_SLOT, BatchConfig, Task, run_batch
+
+    def job(payload):
+        import os
+
+        if payload == 5:
+            os._exit(3)
+        return {"i": payload}
+
+    n = 2 * TASKS_PER_SLOT + 6  # one worker thread: chunks of 2 or 3 items
+    out = run_batch(job, [Task(f"item{i}", i) for i in range(n)], BatchConfig(workers=1, progress=False),
+                    echo=lambda s: None)
+    assert [o.ok for o in out] == [i != 5 for i in range(n)]
+    assert out[5].error.startswith("worker failed: ") and "\n" not in out[5].error
+    assert [o.info["i"] for o in out if o.ok] == [i for i in range(n) if i != 5]
