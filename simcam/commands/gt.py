@@ -92,11 +92,13 @@ def _str(p) -> Optional[str]:
 
 
 def _gt_batch(inputs: list[Path], out_dir: Path, settings: dict, *, workers, scheduler, resume) -> int:
-    from ..batch import BatchConfig, Task, report, run_batch
+    from ..batch import BatchConfig, Task, report, run_batch, start_workers_early
     from ..errors import DatasetError
     from ..io.outputs import check_output_dir
     from ..jobs import ground_truth_job
 
+    config = BatchConfig(workers=workers, scheduler=scheduler, resume=resume)
+    start_workers_early(ground_truth_job, config)
     bursts: list[Path] = []
     for item in inputs:
         if not item.is_dir():
@@ -115,8 +117,7 @@ def _gt_batch(inputs: list[Path], out_dir: Path, settings: dict, *, workers, sch
                            "save_defects": None, "report": str(out_dir / f"{b.name}.json"), "progress": False},
                   outputs=(str(out_dir / f"{b.name}.npz"), str(out_dir / f"{b.name}.json")))
              for b in bursts]
-    outcomes = run_batch(ground_truth_job, tasks, BatchConfig(workers=workers, scheduler=scheduler, resume=resume),
-                         label="gt")
+    outcomes = run_batch(ground_truth_job, tasks, config, label="gt")
     for o in outcomes:
         if o.ok and not o.skipped:
             typer.echo(o.info["summary"])

@@ -105,13 +105,15 @@ def render(
 
 def _render_batch(inputs, out_dir: Path, pipe, *, depth, seed, fmt, workers, scheduler, resume,
                   write: dict | None = None) -> int:
-    from ..batch import BatchConfig, Task, report, run_batch
+    from ..batch import BatchConfig, Task, report, run_batch, start_workers_early
     from ..errors import SimcamError
     from ..io.images import resolve_compression, resolve_depth
     from ..io.inputs import expand_inputs
     from ..io.outputs import check_output_dir
     from ..jobs import render_job
 
+    config = BatchConfig(workers=workers, scheduler=scheduler, resume=resume)
+    start_workers_early(render_job, config)
     files = expand_inputs(inputs, suffixes=(".dng",), what="DNG")
     check_output_dir(out_dir, option="-o", inputs=files)
     ext = "." + fmt.lower().lstrip(".")
@@ -127,8 +129,7 @@ def _render_batch(inputs, out_dir: Path, pipe, *, depth, seed, fmt, workers, sch
     tasks = [Task(str(f), {"input": str(f), "output": str(out_dir / f"{f.stem}{ext}"), "pipeline": doc,
                            "depth": depth, "seed": seed, "index": i, **(write or {})}, outputs=(str(out_dir / f"{f.stem}{ext}"),))
              for i, f in enumerate(files)]
-    outcomes = run_batch(render_job, tasks, BatchConfig(workers=workers, scheduler=scheduler, resume=resume),
-                         label="render")
+    outcomes = run_batch(render_job, tasks, config, label="render")
     done = sum(o.ok and not o.skipped for o in outcomes)
     skipped = sum(o.skipped for o in outcomes)
     typer.echo(f"rendered {done} of {len(tasks)} DNGs into {out_dir}" + (f" ({skipped} already there)" if skipped else ""))

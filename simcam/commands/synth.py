@@ -95,7 +95,7 @@ def _iso_list(iso: Optional[float], isos: Optional[str]) -> list[float]:
 
 def _training_set(inputs, output: Path, *, profile: Path, isos, exposure, camera, seed, as_, cfa, sensor_seed, extrapolate,
                   patches, patch_size, workers, scheduler, resume) -> int:
-    from ..batch import BatchConfig, Task, report, run_batch
+    from ..batch import BatchConfig, Task, report, run_batch, start_workers_early
     from ..errors import SimcamError
     from ..io.inputs import expand_inputs
     from ..io.outputs import check_output_dir
@@ -105,6 +105,8 @@ def _training_set(inputs, output: Path, *, profile: Path, isos, exposure, camera
 
     if patch_size % 2:
         raise SimcamError(f"--patch-size {patch_size}: expected an even number of mosaic pixels")
+    config = BatchConfig(workers=workers, scheduler=scheduler, resume=resume)
+    start_workers_early(synth_patches_job, config)
     sources = expand_inputs(inputs, suffixes=(".dng", ".tif", ".tiff", ".png"), what="clean image")
     check_output_dir(output, option="-o", inputs=[*sources, profile])
     if output.exists() and any(output.iterdir()) and not resume:
@@ -121,8 +123,7 @@ def _training_set(inputs, output: Path, *, profile: Path, isos, exposure, camera
     tasks = [Task(str(s), {**base, "source": str(s), "index": i},
                   outputs=(str(output / "noisy" / "c" / str(i) / "0" / "0" / "0"),))
              for i, s in enumerate(sources)]
-    outcomes = run_batch(synth_patches_job, tasks, BatchConfig(workers=workers, scheduler=scheduler, resume=resume),
-                         label="synth")
+    outcomes = run_batch(synth_patches_job, tasks, config, label="synth")
     items = []
     for i, (s, o) in enumerate(zip(sources, outcomes)):
         item = {"source": str(s), "rows": [i * patches, (i + 1) * patches], "ok": o.ok}
