@@ -55,7 +55,12 @@ def render(
     batch = (len(inputs) > 1 or any(is_pattern(i) or Path(i).is_dir() for i in inputs)
              or output.is_dir() or not output.suffix)
     reading = warming = None
-    if not batch:  # LibRaw decodes the DNG (C code, the GIL released) while this process imports and builds
+    if batch:  # the workers' fork server imports while this process reads the pipeline and lists the inputs
+        from ..batch import BatchConfig, start_workers_early
+        from ..jobs import render_job
+
+        start_workers_early(render_job, BatchConfig(workers=workers, scheduler=scheduler))
+    else:  # LibRaw decodes the DNG (C code, the GIL released) while this process imports and builds
         from concurrent.futures import ThreadPoolExecutor
 
         from ..io.dng import read_dng
@@ -105,7 +110,7 @@ def render(
 
 def _render_batch(inputs, out_dir: Path, pipe, *, depth, seed, fmt, workers, scheduler, resume,
                   write: dict | None = None) -> int:
-    from ..batch import BatchConfig, Task, report, run_batch, start_workers_early
+    from ..batch import BatchConfig, Task, report, run_batch
     from ..errors import SimcamError
     from ..io.images import resolve_compression, resolve_depth
     from ..io.inputs import expand_inputs
@@ -113,7 +118,6 @@ def _render_batch(inputs, out_dir: Path, pipe, *, depth, seed, fmt, workers, sch
     from ..jobs import render_job
 
     config = BatchConfig(workers=workers, scheduler=scheduler, resume=resume)
-    start_workers_early(render_job, config)
     files = expand_inputs(inputs, suffixes=(".dng",), what="DNG")
     check_output_dir(out_dir, option="-o", inputs=files)
     ext = "." + fmt.lower().lstrip(".")
