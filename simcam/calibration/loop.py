@@ -321,6 +321,19 @@ RACE_STAGES = (4, 8)
 RACE_Z = 5.0
 #: the least standard error (nats) the race takes a stage-one gain to have
 RACE_SE_FLOOR = 1.0
+
+
+def race_stages(replicates: int) -> list[int]:
+    """The replicate counts a race scores at: those of :data:`RACE_STAGES` below ``replicates``, then all."""
+    return sorted({min(s, replicates) for s in RACE_STAGES} | {replicates})
+
+
+def race_margin(sd: float) -> float:
+    """:data:`RACE_Z` standard errors of a gain, the SE taken at least :data:`RACE_SE_FLOOR` nats (an SE from a
+    few replicate pairs can come out near 0 by chance)."""
+    return RACE_Z * max(sd, RACE_SE_FLOOR)
+
+
 #: a candidate whose gain is above this many SEs (and MIN_GAIN) but not GAIN_Z gets twice the replicates
 UNCERTAIN_Z = 1.5
 #: a diagnostic the current model reproduces with a held-out p-value at least this can refute a candidate
@@ -616,7 +629,7 @@ class Loop:
         predictive law, falls short of a full-replicate one, and a tied hot-pixel candidate once left
         "71 nats behind"). Returns (record, model, held-out dict) per candidate."""
         R = self.cfg.heldout_replicates
-        stages = sorted({min(s, R) for s in RACE_STAGES} | {R})
+        stages = race_stages(R)
         runs = []
         for rec, cand in fitted:
             run = HeldOut(self, cand, tuple(self.applicable), f"+ {rec['effect']}").extend(stages[0])
@@ -633,11 +646,10 @@ class Loop:
             lead = max(racing, key=lambda t: t[0]["heldout_gain"])[0]
             for rec, _cand, _run in racing:
                 gap = lead["heldout_gain"] - rec["heldout_gain"]
-                # (an SE from a few replicate pairs can come out near 0 by chance: at least RACE_SE_FLOOR nats)
-                if gap > RACE_Z * max(np.hypot(lead["heldout_gain_sd"], rec["heldout_gain_sd"]), RACE_SE_FLOOR):
+                if gap > race_margin(np.hypot(lead["heldout_gain_sd"], rec["heldout_gain_sd"])):
                     rec["left_race"] = f"{gap:.3g} nats behind {lead['effect']} after {n} replicates"
                     behind.add(id(rec))
-                elif rec["heldout_gain"] + RACE_Z * max(rec["heldout_gain_sd"], RACE_SE_FLOOR) < MIN_GAIN:
+                elif rec["heldout_gain"] + race_margin(rec["heldout_gain_sd"]) < MIN_GAIN:
                     rec["left_race"] = f"gain below {MIN_GAIN:g} nats by > {RACE_Z:g} SE after {n} replicates"
         for rec, _cand, run in runs:
             # a gain short of GAIN_Z SEs but beyond UNCERTAIN_Z: the replicates are doubled for it and for the
@@ -793,7 +805,7 @@ class Loop:
         stage stops there (it stays). Returns (model, its held-out dict, whether anything was taken out); every
         test is appended to ``res.backward``."""
         R = self.cfg.heldout_replicates
-        stages = sorted({min(s, R) for s in RACE_STAGES} | {R})
+        stages = race_stages(R)
         changed, skip, rnd = False, set(last), 0
         while len(model.effects) >= 2:
             trials, rnd = [], rnd + 1
@@ -805,7 +817,7 @@ class Loop:
                 rec = {"effect": name, "round": rnd, "parameters": model.effects[name].to_dict()}
                 for n in stages:  # in the race's stages: one that clearly earns its keep stops early
                     self._score(rec, run.extend(n), held_cur)
-                    clear = -rec["heldout_gain"] > MIN_GAIN + RACE_Z * max(rec["heldout_gain_sd"], RACE_SE_FLOOR)
+                    clear = -rec["heldout_gain"] > MIN_GAIN + race_margin(rec["heldout_gain_sd"])
                     if clear:
                         break
                 rec.pop("_beats")

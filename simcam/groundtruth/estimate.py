@@ -23,7 +23,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from ..errors import DatasetError
-from ..parallel import map_threads, run_bands
+from ..parallel import map_threads, run_bands, threads
 from .alignment import (ALIGN_MODES, constant_field, dense_field, field_stats, global_shift, local_shifts,
                         prepare_reference, reject_outliers, warp)
 from .burst import Burst
@@ -215,11 +215,15 @@ def _close(bar) -> None:
 
 def _prefetched(burst: Burst, n: int):
     """``burst.load(i)`` for i < n, in order, each frame read on a second thread while the caller works on
-    the one before (a DNG's decode releases the GIL). Pass A's sums stay in frame order, so the result is
-    the same bytes; a frame that fails to load raises when its turn comes, as a plain loop would."""
+    the one before (a DNG's decode releases the GIL), when :func:`simcam.parallel.threads` allows more than
+    one (a batch worker runs on one). Pass A's sums stay in frame order, so the result is the same bytes; a
+    frame that fails to load raises when its turn comes, as a plain loop would."""
     from concurrent.futures import ThreadPoolExecutor
 
     if n == 0:
+        return
+    if threads() < 2:
+        yield from (burst.load(i) for i in range(n))
         return
     with ThreadPoolExecutor(1, thread_name_prefix="simcam-gt-load") as ex:
         ahead = ex.submit(burst.load, 0)

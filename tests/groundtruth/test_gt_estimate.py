@@ -213,11 +213,15 @@ def test_same_bytes_for_any_thread_count(synth, tmp_path, monkeypatch):
     assert outs[1] == outs[0] and outs[2] == outs[0]
 
 
-def test_pass_a_reads_the_next_frame_ahead_in_order_and_fails_at_the_bad_frame():
+@pytest.mark.parametrize("cap", ["1", "2"])
+def test_pass_a_reads_the_next_frame_ahead_in_order_and_fails_at_the_bad_frame(cap, monkeypatch):
     """Pass A reads frame i + 1 on a second thread while frame i is summed (a DNG decode releases the GIL);
     the frames still come in order, and a frame that cannot be read fails when its turn comes, after the
-    frames before it were used."""
+    frames before it were used. Under a one-thread cap (a batch worker's SIMCAM_THREADS=1) it reads them on
+    the caller's thread."""
     import threading
+
+    monkeypatch.setenv("SIMCAM_THREADS", cap)
 
     from simcam.groundtruth.estimate import _prefetched
 
@@ -235,5 +239,8 @@ def test_pass_a_reads_the_next_frame_ahead_in_order_and_fails_at_the_bad_frame()
         for x in _prefetched(Frames(), 6):
             got.append(float(x[0, 0]))
     assert got == [0.0, 1.0, 2.0]
-    assert readers and all(n.startswith("simcam-gt-load") for n in readers)
+    if cap == "1":
+        assert readers == {threading.current_thread().name}
+    else:
+        assert readers and all(n.startswith("simcam-gt-load") for n in readers)
     assert list(_prefetched(Frames(), 0)) == []
