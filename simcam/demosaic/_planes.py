@@ -52,14 +52,21 @@ def mirror_index(idx: np.ndarray, n: int) -> np.ndarray:
     return np.where(idx > n - 1, period - idx, idx)
 
 
-def _gather(m: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """``m[np.ix_(rows, cols)]`` where ``rows``/``cols`` are stride-2 runs with a few
-    mirrored entries at each end: the bulk is one strided copy."""
-    out = np.empty((rows.size, cols.size), dtype=np.float32)
-    r_in = np.flatnonzero(np.diff(rows) == 2)  # interior run: consecutive steps of +2
-    c_in = np.flatnonzero(np.diff(cols) == 2)
-    ra, rb = (r_in[0], r_in[-1] + 2) if r_in.size else (0, 0)
-    ca, cb = (c_in[0], c_in[-1] + 2) if c_in.size else (0, 0)
+def _runs(idx: np.ndarray) -> tuple[int, int]:
+    """``(a, b)``: ``idx[a:b]`` is the interior stride-2 run of ``idx`` (``(0, 0)`` if none); the
+    entries before ``a`` and from ``b`` on are the few mirrored ones at each end."""
+    inner = np.flatnonzero(np.diff(idx) == 2)  # interior run: consecutive steps of +2
+    return (int(inner[0]), int(inner[-1]) + 2) if inner.size else (0, 0)
+
+
+def _gather(m: np.ndarray, rows: np.ndarray, cols: np.ndarray, out: np.ndarray | None = None,
+            col_run: tuple[int, int] | None = None) -> np.ndarray:
+    """``m[np.ix_(rows, cols)]`` (into ``out`` if given) where ``rows``/``cols`` are stride-2 runs with a
+    few mirrored entries at each end: the bulk is one strided copy."""
+    if out is None:
+        out = np.empty((rows.size, cols.size), dtype=np.float32)
+    ra, rb = _runs(rows)
+    ca, cb = _runs(cols) if col_run is None else col_run
     if rb > ra and cb > ca:
         out[ra:rb, ca:cb] = m[rows[ra]:rows[rb - 1] + 1:2, cols[ca]:cols[cb - 1] + 1:2]
     else:
@@ -73,20 +80,39 @@ def _gather(m: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
     return out
 
 
-def phase_planes(m: np.ndarray) -> tuple[list[list[np.ndarray]], int, int]:
-    """The four CFA-phase planes of the mosaic mirror-padded by 2 pixels.
+class PhasePlanes:
+    """The four CFA-phase planes of a mosaic mirror-padded by 2 pixels, gathered strip by strip.
 
-    Returns ``(planes, He, We)``: ``planes[p][q][i, j]`` is the padded mosaic at
-    ``(2 i + p - 2, 2 j + q - 2)`` of the image, so output pixel
-    ``(2 i + p, 2 j + q)`` sits at ``planes[p][q][i + 1, j + 1]``. ``He``/``We``
-    are H and W rounded up to even (the computed grid; crop to H x W after).
+    ``planes[p][q][i, j]`` is the padded mosaic at ``(2 i + p - 2, 2 j + q - 2)`` of the image, so
+    output pixel ``(2 i + p, 2 j + q)`` sits at ``planes[p][q][i + 1, j + 1]``. ``he``/``we`` are H
+    and W rounded up to even (the computed grid; crop to H x W after).
+
+    :meth:`strip` copies the plane rows one strip of output needs into its thread's buffers, so the
+    whole planes (a second copy of the mosaic: 48 MB of fresh memory at 12 MP, which a new process
+    pays for page by page, in one serial pass before the strips start) are never made.
     """
-    h, w = m.shape
-    he, we = h + h % 2, w + w % 2
-    rows = [mirror_index(np.arange(p - 2, he + 2, 2), h) for p in (0, 1)]
-    cols = [mirror_index(np.arange(q - 2, we + 2, 2), w) for q in (0, 1)]
-    planes = [[_gather(m, rows[p], cols[q]) for q in (0, 1)] for p in (0, 1)]
-    return planes, he, we
+
+    def __init__(self, m: np.ndarray, rows: int):
+        import threading
+
+        h, w = m.shape
+        self.m, self.rows = m, rows
+        self.he, self.we = h + h % 2, w + w % 2
+        self.row_idx = [mirror_index(np.arange(p - 2, self.he + 2, 2), h) for p in (0, 1)]
+        self.col_idx = [mirror_index(np.arange(q - 2, self.we + 2, 2), w) for q in (0, 1)]
+        self.col_runs = [_runs(c) for c in self.col_idx]
+        self.local = threading.local()
+
+    def strip(self, s0: int, s1: int) -> list[list[np.ndarray]]:
+        """Plane rows ``[s0, s1 + 2)`` (what output plane rows ``[s0, s1)`` read), in this thread's
+        buffers: index them as :class:`PhaseView` with ``s0 = 0`` (valid until the thread's next strip)."""
+        bufs = getattr(self.local, "bufs", None)
+        if bufs is None:
+            wp = self.we // 2 + 2
+            bufs = self.local.bufs = [[np.empty((self.rows + 2, wp), np.float32) for _ in (0, 1)] for _ in (0, 1)]
+        n = s1 - s0 + 2
+        return [[_gather(self.m, self.row_idx[p][s0:s0 + n], self.col_idx[q], out=bufs[p][q][:n],
+                         col_run=self.col_runs[q]) for q in (0, 1)] for p in (0, 1)]
 
 
 class PhaseView:
@@ -109,17 +135,20 @@ class PhaseView:
 
 
 def strip_setup(mosaic, cfa: str, method: str, *, full: bool = True):
-    """What the strip kernels start from: the checked mosaic and pattern, its phase planes, the
-    half-size grid ``(h2, w2)``, the even-size float32 output (None when ``full`` is False: the strips
-    then go to a sink, :class:`StripTarget`) and the strip height.
+    """What the strip kernels start from: the checked mosaic and pattern, its phase planes (a
+    :class:`PhasePlanes`: each strip gathers its own rows), the half-size grid ``(h2, w2)``, the
+    even-size float32 output (None when ``full`` is False: the strips then go to a sink,
+    :class:`StripTarget`) and the strip height.
 
     Returns ``(m, cfa, planes, h2, w2, rgb, rows)``; crop ``rgb`` to ``m.shape`` with :func:`crop_output`.
     """
     m, cfa = check_mosaic(mosaic, cfa, method)
-    planes, he, we = phase_planes(m)
-    h2, w2 = he // 2, we // 2
-    rgb = np.empty((he, we, 3), dtype=np.float32) if full else None
-    return m, cfa, planes, h2, w2, rgb, min(STRIP_ROWS, h2)
+    h, w = m.shape
+    rows = min(STRIP_ROWS, (h + h % 2) // 2)
+    planes = PhasePlanes(m, rows)
+    h2, w2 = planes.he // 2, planes.we // 2
+    rgb = np.empty((planes.he, planes.we, 3), dtype=np.float32) if full else None
+    return m, cfa, planes, h2, w2, rgb, rows
 
 
 class StripTarget:

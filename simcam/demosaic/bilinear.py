@@ -61,8 +61,9 @@ def demosaic_bilinear(mosaic: np.ndarray, cfa: str = "RGGB", *, sink=None):
             buf = local.buf = np.empty((rows, w2), dtype=np.float32)
         t = buf[: s1 - s0]
         dest, y0 = target.block(s0)
+        local_planes = planes.strip(s0, s1)
         for (p, q), (site, horiz) in site_layout(cfa).items():
-            nb = PhaseView(planes, p, q, s0, s1, w2)
+            nb = PhaseView(local_planes, p, q, 0, s1 - s0, w2)
             out = dest[2 * s0 - y0 + p:2 * s1 - y0:2, q::2]
             out[..., site] = nb(0, 0)
             if site == 1:  # G site: row neighbours give `horiz`, column neighbours the other

@@ -71,8 +71,9 @@ def demosaic_malvar2004(mosaic: np.ndarray, cfa: str = "RGGB", *, sink=None):
             bufs = local.bufs = [np.empty((rows, w2), dtype=np.float32) for _ in range(5)]
         t = [b[: s1 - s0] for b in bufs]
         dest, y0 = target.block(s0)
+        local_planes = planes.strip(s0, s1)
         for (p, q), (site, horiz) in layout.items():
-            nb = PhaseView(planes, p, q, s0, s1, w2)
+            nb = PhaseView(local_planes, p, q, 0, s1 - s0, w2)
             out = dest[2 * s0 - y0 + p:2 * s1 - y0:2, q::2]
             c = nb(0, 0)
             out[..., site] = c

@@ -1,14 +1,8 @@
-"""Built-in pipeline stages. Importing this package registers every stage module in it."""
+"""Built-in pipeline stages, one module each, imported when a pipeline first names one of their types
+(:data:`simcam.stages.base.BUILTIN_STAGES`; :func:`stage_types` imports them all)."""
 
 from __future__ import annotations
 
-import importlib
-import pkgutil
+from .base import BUILTIN_STAGES, Stage, StageParams, get_stage_class, register_stage, stage_types
 
-from .base import Stage, StageParams, get_stage_class, register_stage, stage_types
-
-for _mod in pkgutil.iter_modules(__path__):
-    if _mod.name != "base" and not _mod.name.startswith("_"):
-        importlib.import_module(f"{__name__}.{_mod.name}")
-
-__all__ = ["Stage", "StageParams", "register_stage", "get_stage_class", "stage_types"]
+__all__ = ["BUILTIN_STAGES", "Stage", "StageParams", "register_stage", "get_stage_class", "stage_types"]

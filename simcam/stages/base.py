@@ -26,6 +26,25 @@ from ..registry import Registry
 
 _REGISTRY = Registry("stage type", name_both=True)
 
+#: the built-in stage types and the module of :mod:`simcam.stages` that defines each; a module is
+#: imported when a pipeline first names one of its types (a render does not pay for the ``dcp`` or
+#: ``noise`` stages' imports), and all of them by :func:`stage_types`
+BUILTIN_STAGES = {
+    "camera_to_xyz": "camera_to_xyz", "clip": "clip", "quantize": "clip", "dcp": "dcp", "demosaic": "demosaic",
+    "gamma": "gamma", "highlights": "highlights", "lens_shading": "lens_shading", "noise": "noise",
+    "clip_raw": "noise", "opcodes": "opcodes", "orientation": "orientation", "normalize": "raw", "crop": "raw",
+    "tone": "tone", "white_balance": "white_balance", "xyz_to_srgb": "xyz_to_srgb",
+}
+
+
+def _load_builtin(key: str) -> None:
+    """Import the module that defines the built-in stage ``key`` (if it is one)."""
+    mod = BUILTIN_STAGES.get(key)
+    if mod is not None:
+        import importlib
+
+        importlib.import_module(f"{__package__}.{mod}")
+
 
 class StageParams(BaseModel):
     """Base of every stage's parameters: unknown keys and loose types are errors.
@@ -190,6 +209,8 @@ def register_stage(cls: type[Stage]) -> type[Stage]:
     key = getattr(cls, "type", None)
     if not key or not isinstance(key, str):
         raise TypeError(f"{cls.__name__} needs a string class attribute 'type'")
+    if key in BUILTIN_STAGES and key not in _REGISTRY and cls.__module__ != f"{__package__}.{BUILTIN_STAGES[key]}":
+        _load_builtin(key)  # a built-in's name stays taken before its module is imported
     return _REGISTRY.add(key, cls)
 
 
@@ -211,6 +232,9 @@ def stage_types() -> dict[str, type[Stage]]:
     >>> {"demosaic", "gamma"} <= set(stage_types())
     True
     """
+    for key in BUILTIN_STAGES:
+        if key not in _REGISTRY:
+            _load_builtin(key)
     return _REGISTRY.types()
 
 
@@ -240,11 +264,13 @@ def get_stage_class(key: str, *, where: str = "type") -> type[Stage]:
     >>> get_stage_class("gamma").__name__
     'Gamma'
     """
+    if key not in _REGISTRY:
+        _load_builtin(key)
     try:
         return _REGISTRY[key]
     except KeyError:
         raise PipelineError(
-            f"{where}: unknown stage {key!r}; expected one of {', '.join(sorted(_REGISTRY))}"
+            f"{where}: unknown stage {key!r}; expected one of {', '.join(sorted(stage_types()))}"
         ) from None
 
 

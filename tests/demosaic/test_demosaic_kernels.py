@@ -67,9 +67,10 @@ def test_interior_matches_colour_demosaicing(method, cfa, kind):
 
 @pytest.mark.parametrize("method", sorted(REFERENCES))
 @pytest.mark.parametrize("cfa", BAYER_PATTERNS)
-@pytest.mark.parametrize("shape", [(24, 30), (23, 30), (24, 31), (17, 9), (3, 5), (2, 2)])
+@pytest.mark.parametrize("shape", [(24, 30), (23, 30), (24, 31), (17, 9), (3, 5), (2, 2), (71, 40), (64, 33)])
 def test_whole_image_matches_colour_on_mirror_padded_mosaic(method, cfa, shape):
-    """Borders (and odd sizes): colour-demosaicing on np.pad(mode="reflect") by 2, cropped."""
+    """Borders (and odd sizes): colour-demosaicing on np.pad(mode="reflect") by 2, cropped. The last two
+    shapes span several strips (each gathers its own phase-plane rows, mirrored at the top and bottom)."""
     ours_fn, ref_fn, _ = REFERENCES[method]
     m = random_mosaic(shape, seed=shape[0] * 100 + shape[1])
     padded = np.pad(m.astype(np.float64), 2, mode="reflect")  # even pad: same pattern string

@@ -93,3 +93,47 @@ def test_stage_kinds_are_valid():
     for key, cls in stage_types().items():
         assert cls.accepts and set(cls.accepts) <= set(SIGNAL_KINDS), key
         assert cls.produces is None or cls.produces in SIGNAL_KINDS, key
+
+
+def test_the_builtin_table_names_every_stage_module_registers():
+    """``BUILTIN_STAGES`` (type -> module, imported on first use) is what the modules of simcam.stages define."""
+    import importlib
+    import pkgutil
+
+    import simcam.stages
+    from simcam.stages.base import BUILTIN_STAGES
+
+    found = {}
+    for mod in pkgutil.iter_modules(simcam.stages.__path__):
+        if mod.name != "base" and not mod.name.startswith("_"):
+            m = importlib.import_module(f"simcam.stages.{mod.name}")
+            for cls in vars(m).values():
+                if isinstance(cls, type) and cls.__module__ == m.__name__ and isinstance(getattr(cls, "type", None), str):
+                    found[cls.type] = mod.name
+    assert found == BUILTIN_STAGES
+
+
+def test_a_pipeline_imports_only_the_stage_modules_it_names():
+    import subprocess
+    import sys
+
+    code = ("import sys; from simcam.pipeline import Pipeline; Pipeline.from_yaml('srgb'); "
+            "print(sorted(m for m in sys.modules if m.startswith('simcam.stages.')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert "simcam.stages.demosaic" in out and "simcam.stages.raw" in out
+    assert "simcam.stages.dcp" not in out and "simcam.stages.noise" not in out
+
+
+def test_a_user_stage_cannot_take_a_builtin_name_not_yet_imported():
+    import subprocess
+    import sys
+
+    code = ("from simcam.stages.base import Stage, register_stage\n"
+            "try:\n"
+            "    @register_stage\n"
+            "    class Mine(Stage, type='dcp'):\n"
+            "        pass\n"
+            "except TypeError as exc:\n"
+            "    print(exc)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert "registered twice" in out, out
