@@ -41,23 +41,33 @@ def render_file(input: str | Path, output: str | Path, *, pipeline: Any = "srgb"
         ``{"output", "width", "height", "kind"}``.
     """
     from .io.dng import read_dng
-    from .io.images import resolve_depth, write_image
+    from .io.images import ext_is_tiff, resolve_compression, resolve_depth, write_image
+    from .io.tiff_stream import TiffStream
     from .pipeline import Pipeline
     from .render_samples import render_samples
 
     pipe = pipeline if isinstance(pipeline, Pipeline) else (
         Pipeline.from_dict(pipeline, source="<batch>") if isinstance(pipeline, dict) else Pipeline.from_yaml(pipeline))
     dtype = resolve_depth(output, depth)
+    # an uncompressed TIFF (the default for .tif) is written strip by strip as the render makes it
+    stream = (TiffStream(output, protect=(input,)) if ext_is_tiff(Path(output)) and not attributes
+              and thumbnail is None and resolve_compression(output, compression) == "none"
+              and dtype in ("uint8", "uint16", "float32") else None)
     warming = pipe.warm_in_background()  # e.g. numba's set-up for Menon 2007 while the DNG is read
     try:
         out = render_samples(pipe, read_dng(input) if frame is None else frame, dtype, seed=seed, index=index,
-                             progress=progress)
+                             progress=progress, target=stream)
+        if out.samples is None:
+            stream.commit()
     finally:
         if warming is not None:
             warming.join()
-    write_image(output, out, depth=dtype, protect=(input,), attributes=attributes, quality=quality,
-                compression=compression, thumbnail=thumbnail)
-    h, w = out.samples.shape[:2]
+        if stream is not None:
+            stream.discard()
+    if out.samples is not None:
+        write_image(output, out, depth=dtype, protect=(input,), attributes=attributes, quality=quality,
+                    compression=compression, thumbnail=thumbnail)
+    h, w = out.shape[:2]
     return {"output": str(output), "width": w, "height": h, "kind": out.kind}
 
 
@@ -234,8 +244,12 @@ def bench_job(payload: dict):
 
 # What a batch worker starts with imported (simcam.batch: the fork server imports them once for
 # every local worker): the modules each job imports when it runs.
-render_job.preload = ("simcam.io.dng", "simcam.io.images", "simcam.io.icc", "simcam.io.png_write", "simcam.pipeline",
-                      "simcam.render_samples", "simcam.colour.display_kernel")
+render_job.preload = ("simcam.io.dng", "simcam.io.images", "simcam.io.icc", "simcam.io.png_write", "simcam.io.tiff_stream",
+                      "simcam.pipeline", "simcam.render_samples", "simcam.colour.display_kernel",
+                      # the stage modules of the built-in render pipelines (imported when a pipeline names them)
+                      *(f"simcam.stages.{m}" for m in ("opcodes", "raw", "lens_shading", "white_balance", "clip",
+                                                       "demosaic", "camera_to_xyz", "xyz_to_srgb", "tone", "gamma",
+                                                       "orientation")))
 synth_patches_job.preload = ("zarr", "simcam.synth", "simcam.profiles.schema", "simcam.stages.noise",
                              "simcam.noise", "simcam.noise.noise_profile", "simcam.io.normalized", "simcam.training.crops")
 ground_truth_job.preload = ("simcam.groundtruth", "simcam.io.atomic", "simcam.io.dng", "simcam.io.npz", "simcam.raw")

@@ -186,14 +186,11 @@ def test_local_cluster_workers_run_with_one_thread_and_glibc_malloc_defaults():
 PRELOAD_CHECK = """
 import importlib, json, sys
 from simcam import jobs
-from simcam.pipeline import Pipeline
 job = getattr(jobs, sys.argv[1])
 for m in job.preload:
     importlib.import_module(m)
 payload = json.loads(sys.argv[2])
-if sys.argv[1] == "render_job":
-    payload["pipeline"] = Pipeline.from_yaml("srgb").to_dict()
-elif sys.argv[1] == "synth_patches_job":
+if sys.argv[1] == "synth_patches_job":
     from simcam.trainingset import create_store
     create_store(payload["store"], sources=[payload["source"]], patches=4, patch_size=16, overwrite=True)
 before = set(sys.modules)
@@ -209,8 +206,11 @@ def test_job_preload_covers_what_its_first_item_imports(job, inputs, tmp_path):
     job imports on its first item is imported by each worker after the cluster started, on the way to
     its first result (simcam.noise and numba: ~0.5 s per worker before this list was completed)."""
     src = str(inputs / "img0.dng")
-    if job == "render_job":
-        payload = {"input": src, "output": str(tmp_path / "x.png"), "seed": 0, "index": 0}
+    if job == "render_job":  # the pipeline as the client sends it (its stage modules not imported by the worker)
+        from simcam.pipeline import Pipeline
+
+        payload = {"input": src, "output": str(tmp_path / "x.png"), "seed": 0, "index": 0,
+                   "pipeline": Pipeline.from_yaml("srgb").to_dict()}
     elif job == "ground_truth_job":
         r = run_cli("synth", CHART, "-o", tmp_path / "burst", "--profile", PROFILE, "--iso", 800, "--frames", 3,
                     "--seed", 4)

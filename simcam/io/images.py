@@ -174,17 +174,13 @@ def write_image(path: str | Path, data, *, depth: str | int | None = None,
         kind, meta, data = kind or data.kind, meta if meta is not None else data.meta, data.data
     elif hasattr(data, "samples") and hasattr(data, "kind"):
         kind, meta, data = kind or data.kind, meta if meta is not None else data.meta, data.samples
-    for p in protect:
-        if Path(p).exists() and path.exists() and os.path.samefile(p, path):
-            raise ImageIOError(f"{path}: refusing to overwrite the input file")
+    check_output_path(path, protect)
     if depth is None and np.asarray(data).dtype in (np.uint8, np.uint16, np.float16):
         depth = {"float16": "half"}.get(str(np.asarray(data).dtype), str(np.asarray(data).dtype))
     dtype = resolve_depth(path, depth)
     comp = resolve_compression(path, compression)
     if not 1 <= int(quality) <= 100:
         raise ImageIOError(f"{path}: quality {quality!r}: expected an integer in 1..100")
-    if not path.parent.exists():
-        raise ImageIOError(f"{path}: output folder {path.parent} does not exist")
     data = np.asarray(data)
     if data.dtype.kind in "ui" and data.dtype != np.dtype(dtype):
         raise ImageIOError(f"{path}: {data.dtype} samples cannot be written as {dtype}; pass float data")
@@ -273,6 +269,16 @@ def _write_tiff(path: Path, samples: np.ndarray, comp: str, kind: str | None, me
     """An uncompressed or Deflate TIFF through :func:`simcam.io.tiff_write.write_tiff` (tifffile)."""
     from .tiff_write import write_tiff
 
+    with atomic_output(path, suffix=path.suffix) as tmp:
+        try:
+            write_tiff(tmp, samples, compression=comp, **tiff_tags(kind, meta))
+        except (OSError, ValueError) as exc:
+            raise ImageIOError(f"{path}: write failed ({type(exc).__name__}: {exc})") from None
+
+
+def tiff_tags(kind: str | None, meta) -> dict:
+    """The ``icc``, ``tags`` and ``exif`` arguments of :func:`simcam.io.tiff_write.write_tiff` for
+    samples of signal ``kind`` (an ICC profile for the display kinds) from a camera with ``meta``."""
     icc = None
     if kind in COLOUR_SPACES:
         from .icc import srgb_icc_profile
@@ -284,11 +290,17 @@ def _write_tiff(path: Path, samples: np.ndarray, comp: str, kind: str | None, me
             "PhotographicSensitivity": ex.get("Exif:PhotographicSensitivity"),
             "DateTimeOriginal": ex.get("Exif:DateTimeOriginal"), "FocalLength": ex.get("Exif:FocalLength")}
     exif = {k: v for k, v in exif.items() if v}
-    with atomic_output(path, suffix=path.suffix) as tmp:
-        try:
-            write_tiff(tmp, samples, compression=comp, icc=icc, tags=tags, exif=exif or None)
-        except (OSError, ValueError) as exc:
-            raise ImageIOError(f"{path}: write failed ({type(exc).__name__}: {exc})") from None
+    return {"icc": icc, "tags": tags, "exif": exif or None}
+
+
+def check_output_path(path: Path, protect: tuple = ()) -> None:
+    """The checks of :func:`write_image` on where it writes: never one of ``protect`` (the inputs), into a
+    folder that exists."""
+    for p in protect:
+        if Path(p).exists() and path.exists() and os.path.samefile(p, path):
+            raise ImageIOError(f"{path}: refusing to overwrite the input file")
+    if not path.parent.exists():
+        raise ImageIOError(f"{path}: output folder {path.parent} does not exist")
 
 
 def _colour_tags(spec, ext: str, kind: str | None) -> None:

@@ -77,9 +77,15 @@ def _ifd_bytes(entries, start: int, *, big: bool) -> bytes:
     return b"".join(body) + b"".join(extra)
 
 
-def write_tiff(path: str | Path, samples: np.ndarray, *, compression: str = "none", icc: bytes | None = None,
-               tags: dict | None = None, exif: dict | None = None, bigtiff: bool | None = None) -> None:
+def write_tiff(path: str | Path, samples: np.ndarray | None, *, compression: str = "none", icc: bytes | None = None,
+               tags: dict | None = None, exif: dict | None = None, bigtiff: bool | None = None,
+               shape: tuple[int, int, int] | None = None, dtype=None) -> int | None:
     """Write H x W x C (C = 1 or 3) ``uint8``/``uint16``/``float32`` samples to a new TIFF at ``path``.
+
+    Returns the file offset of the samples when they are uncompressed (None otherwise). With
+    ``samples=None`` (``shape`` and ``dtype`` given, uncompressed) the file gets every tag and a
+    region of the samples' size, not written (a hole in the file), at that offset: the same bytes
+    once the samples are written there in C order (:class:`simcam.io.tiff_stream.TiffStream`).
 
     Parameters
     ----------
@@ -101,8 +107,11 @@ def write_tiff(path: str | Path, samples: np.ndarray, *, compression: str = "non
     name, _, level = compression.partition(":")
     if name not in COMPRESSIONS:
         raise ValueError(f"write_tiff: compression {compression!r}: expected one of {COMPRESSIONS}")
-    h, w, c = samples.shape
-    big = samples.nbytes > 2**32 - 2**26 if bigtiff is None else bool(bigtiff)
+    if samples is None and (shape is None or dtype is None or name != "none"):
+        raise ValueError("write_tiff: samples=None needs shape and dtype, uncompressed")
+    h, w, c = samples.shape if samples is not None else shape
+    nbytes = h * w * c * np.dtype(samples.dtype if samples is not None else dtype).itemsize
+    big = nbytes > 2**32 - 2**26 if bigtiff is None else bool(bigtiff)
     extratags = []
     for code, key in ((271, "Make"), (272, "Model")):
         if tags.get(key):
@@ -114,12 +123,17 @@ def write_tiff(path: str | Path, samples: np.ndarray, *, compression: str = "non
         if samples.dtype.kind in "ui":
             kwargs["predictor"] = True
     datetime = tags.get("DateTime") or None
-    tifffile.imwrite(path, np.ascontiguousarray(samples) if c > 1 else samples[:, :, 0],
-                     photometric="rgb" if c == 3 else "minisblack", planarconfig="contig" if c > 1 else None,
-                     software=str(tags.get("Software", "simcam")), datetime=datetime, metadata=None,
-                     iccprofile=icc, extratags=extratags, bigtiff=big, byteorder="<", **kwargs)
+    if samples is None:
+        kwargs.update(shape=(h, w, c) if c > 1 else (h, w), dtype=np.dtype(dtype))
+    else:
+        samples = np.ascontiguousarray(samples) if c > 1 else samples[:, :, 0]
+    where = tifffile.imwrite(path, samples, photometric="rgb" if c == 3 else "minisblack",
+                             planarconfig="contig" if c > 1 else None, software=str(tags.get("Software", "simcam")),
+                             datetime=datetime, metadata=None, iccprofile=icc, extratags=extratags, bigtiff=big,
+                             byteorder="<", returnoffset=name == "none", **kwargs)
     if exif:
         _add_exif_ifd(path, exif_entries(exif), big=big)
+    return int(where[0]) if where else None
 
 
 def _add_exif_ifd(path, entries, *, big: bool) -> None:
