@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .frame import RawFrame
+from .row_fusion import row_source
 
 _LINEAR = ("camera_to_xyz", "xyz_to_srgb", "tone")
 #: stages that act on each pixel alone (no neighbours, no randomness), so they can run on row bands
@@ -127,6 +128,11 @@ def render_samples(pipe, frame: RawFrame, depth: str, *, seed: int | None = None
     if start < len(stages):
         k = streamed_demosaic(stages, start)
         if k < start:
+            planned = row_source(stages[:k], frame, progress) if k else None
+            if planned is not None:  # the head's rows made strip by strip inside the demosaic
+                rows, frame = planned
+                return _done(render_demosaic_tail(stages[k:start], stages[start:], frame, depth, target=target,
+                                                  rows=rows), stages[k:], progress)
             head = _head(pipe, k)
             frame = head(frame, seed=seed, index=index, progress=progress) if head is not None else frame
             return _done(render_demosaic_tail(stages[k:start], stages[start:], frame, depth, target=target),
@@ -267,7 +273,7 @@ def streamed_demosaic(stages, start: int) -> int:
     return start
 
 
-def render_demosaic_tail(middle, tail, frame: RawFrame, depth: str, *, target=None) -> Rendered:
+def render_demosaic_tail(middle, tail, frame: RawFrame, depth: str, *, target=None, rows=None) -> Rendered:
     """Demosaic straight into the fused display tail: each strip of the demosaic is encoded to output
     samples while it is in cache (:func:`simcam.colour.display_kernel.display_encoder`), so the
     H x W x 3 float32 image (144 MB at 12 MP) is never written and read back.
@@ -279,7 +285,9 @@ def render_demosaic_tail(middle, tail, frame: RawFrame, depth: str, *, target=No
     The samples are those of :func:`render_tail` on the stage-by-stage frame, byte for byte (the same
     kernels on the same pixels). With a ``target`` (a :class:`simcam.io.tiff_stream.TiffStream`) and
     an upright output, each strip's samples go to it from a small buffer per thread instead of into an
-    H x W x 3 array (72 MB of fresh memory at 12 MP, 16 bits).
+    H x W x 3 array (72 MB of fresh memory at 12 MP, 16 bits). With ``rows`` (a
+    :class:`simcam.row_fusion.RowSource`: the pipeline's head, planned by :func:`simcam.row_fusion.row_source`)
+    the mosaic's rows are made strip by strip from it and ``frame`` only gives the metadata and shape.
     """
     from .colour.display_kernel import display_encoder, sample_dtype
     from .errors import ImageIOError
@@ -287,6 +295,8 @@ def render_demosaic_tail(middle, tail, frame: RawFrame, depth: str, *, target=No
     demosaic = middle[0]
     demosaic.check_input(frame)
     if any(st.type == "opcodes" and getattr(frame.meta, f"opcode_list{st.params.list}") for st in middle[1:]):
+        if rows is not None:
+            frame = frame.evolve(rows.materialize())
         for st in middle:
             frame = st(frame)
         return render_tail(tail, frame, depth)
@@ -309,7 +319,7 @@ def render_demosaic_tail(middle, tail, frame: RawFrame, depth: str, *, target=No
     shape, dtype = (bottom - top, right - left, 3), sample_dtype(depth)
     if target is not None and (plan.orientation is None or plan.orientation.transform_value(meta) == 1):
         out_meta = _upright_meta(plan, meta)
-        rows = target.open(shape, dtype, plan.kind, out_meta)
+        writer = target.open(shape, dtype, plan.kind, out_meta)
         local = threading.local()
 
         def sink(y0: int, y1: int, block: np.ndarray) -> bool:
@@ -321,10 +331,10 @@ def render_demosaic_tail(middle, tail, frame: RawFrame, depth: str, *, target=No
                 buf = local.buf = np.empty((z - a,) + shape[1:], dtype)
             if encode(block[a - y0:z - y0, left:right], buf[:z - a]):
                 return True
-            rows.write(a - top, buf[:z - a])
+            writer.write(a - top, buf[:z - a])
             return False
 
-        if demosaic.stream(frame, sink=sink):
+        if demosaic.stream(frame, sink=sink, rows=rows):
             raise ImageIOError(f"{meta.source or 'frame'}: image data contains NaN or infinite values")
         return Rendered(None, plan.kind, out_meta, depth, shape)
     out = np.empty(shape, dtype)
@@ -333,7 +343,7 @@ def render_demosaic_tail(middle, tail, frame: RawFrame, depth: str, *, target=No
         a, z = max(y0, top), min(y1, bottom)
         return a < z and encode(block[a - y0:z - y0, left:right], out[a - top:z - top])
 
-    if demosaic.stream(frame, sink=sink):
+    if demosaic.stream(frame, sink=sink, rows=rows):
         raise ImageIOError(f"{meta.source or 'frame'}: image data contains NaN or infinite values")
     return _oriented(out, plan, meta, depth)
 

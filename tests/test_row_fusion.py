@@ -96,3 +96,40 @@ def test_errors_are_the_stages_own():
     frame.meta.cfa = None
     with pytest.raises(Exception, match="cfa: a mosaic needs meta.cfa"):
         Pipeline(_stages(*HEAD))(frame)
+
+
+@pytest.mark.parametrize("active_area", [None, (2, 4, 1000, 396), (3, 1, 999, 397)])  # odd offsets: phase update
+def test_a_row_source_gives_every_band_of_the_formula(active_area):
+    """``row_source``: any band of rows, made on demand, equals the formula (and the fused head's rows)."""
+    frame = _frame(1000, 400, np.uint16, seed=5, active_area=active_area)
+    nodes = list(HEAD)
+    if active_area is not None and active_area[0] % 2:
+        nodes[1] = {"type": "crop", "region": "active_area", "phase": "update"}
+    stages = _stages(*nodes)
+    calls = []
+    rows, planned = row_fusion.row_source(stages, frame, progress=calls.append)
+    full = Pipeline(stages)(frame)
+    top, left = (0, 0) if active_area is None else active_area[:2]
+    assert rows.shape == full.data.shape == planned.data.shape
+    assert planned.meta.cfa == full.meta.cfa and planned.kind == full.kind == "raw"
+    assert calls == [n["type"] for n in nodes]
+    expected = full.data  # the stages run on the whole frame
+    if top % 2 == 0 and left % 2 == 0:  # the formula's gains follow GRBG from (0, 0): even offsets only
+        np.testing.assert_array_equal(expected, _expected(frame.data, top, left)[:expected.shape[0], :expected.shape[1]])
+    for a, b in [(0, 1), (0, 37), (5, 6), (17, 50), (full.data.shape[0] - 3, full.data.shape[0])]:
+        assert rows.rows(a, b).tobytes() == expected[a:b].tobytes(), (a, b)
+    assert rows.materialize().tobytes() == expected.tobytes()
+
+
+def test_a_row_source_refuses_what_it_cannot_plan():
+    frame = _frame(64, 64, np.uint16)
+    noise = {"type": "noise", "model": {"type": "nlf", "beta1": 1e-3, "beta2": 1e-5}}
+    assert row_fusion.row_source(_stages({"type": "normalize"}, noise), frame) is None  # random
+    from simcam.io.sample_dng import radial_gain_maps
+
+    frame.meta.opcode_list2 = radial_gain_maps(64, 64)  # lens shading that acts: not a row map
+    assert row_fusion.row_source(_stages({"type": "normalize"}, {"type": "lens_shading"}), frame) is None
+    assert row_fusion.row_source(_stages({"type": "normalize"}, {"type": "opcodes", "list": 1}), frame) is not None
+    frame.meta.white_level = 50.0  # the stages' own checks, as when they run
+    with pytest.raises(Exception, match="WhiteLevel: expected white"):
+        row_fusion.row_source(_stages(*HEAD), frame)

@@ -30,7 +30,16 @@ STRIP_ROWS = 16
 
 
 def check_mosaic(mosaic, cfa: str, method: str) -> tuple[np.ndarray, str]:
-    """Validate a mosaic and pattern; return (float32 C-contiguous mosaic, pattern)."""
+    """Validate a mosaic and pattern; return (float32 C-contiguous mosaic, pattern). A row source (an
+    object with ``shape`` and ``rows(a, b)`` giving float32 mosaic rows ``[a, b)`` on demand, e.g.
+    :class:`simcam.row_fusion.RowSource`) is kept as it is."""
+    if is_row_source(mosaic):
+        if mosaic.shape[0] < 2 or mosaic.shape[1] < 2:
+            raise StageError(f"demosaic ({method}): mosaic: expected at least 2 x 2 pixels, got shape {mosaic.shape}")
+        try:
+            return mosaic, check_pattern(cfa, where=f"demosaic ({method}): cfa")
+        except CfaError as exc:
+            raise StageError(str(exc)) from None
     arr = np.asarray(mosaic)
     if arr.ndim != 2:
         raise StageError(f"demosaic ({method}): mosaic: expected a 2-D H x W array, got shape {arr.shape}")
@@ -43,6 +52,11 @@ def check_mosaic(mosaic, cfa: str, method: str) -> tuple[np.ndarray, str]:
     except CfaError as exc:  # a demosaic kernel's input error is a stage error
         raise StageError(str(exc)) from None
     return np.ascontiguousarray(arr, dtype=np.float32), pattern
+
+
+def is_row_source(mosaic) -> bool:
+    """True for a row source (see :func:`check_mosaic`) rather than an array."""
+    return not isinstance(mosaic, np.ndarray) and callable(getattr(mosaic, "rows", None)) and hasattr(mosaic, "shape")
 
 
 def mirror_index(idx: np.ndarray, n: int) -> np.ndarray:
@@ -92,7 +106,8 @@ class PhasePlanes:
     pays for page by page, in one serial pass before the strips start) are never made.
     """
 
-    def __init__(self, m: np.ndarray, rows: int):
+    def __init__(self, m, rows: int):
+        """``m``: the H x W float32 mosaic, or a row source of it (:func:`check_mosaic`)."""
         import threading
 
         h, w = m.shape
@@ -111,8 +126,14 @@ class PhasePlanes:
             wp = self.we // 2 + 2
             bufs = self.local.bufs = [[np.empty((self.rows + 2, wp), np.float32) for _ in (0, 1)] for _ in (0, 1)]
         n = s1 - s0 + 2
-        return [[_gather(self.m, self.row_idx[p][s0:s0 + n], self.col_idx[q], out=bufs[p][q][:n],
-                         col_run=self.col_runs[q]) for q in (0, 1)] for p in (0, 1)]
+        idx = [self.row_idx[p][s0:s0 + n] for p in (0, 1)]
+        m = self.m
+        if is_row_source(m):  # make the mosaic rows the strip reads (mirrored ones too)
+            a = int(min(idx[0].min(), idx[1].min()))
+            m = m.rows(a, int(max(idx[0].max(), idx[1].max())) + 1)
+            idx = [i - a for i in idx]
+        return [[_gather(m, idx[p], self.col_idx[q], out=bufs[p][q][:n], col_run=self.col_runs[q]) for q in (0, 1)]
+                for p in (0, 1)]
 
 
 class PhaseView:

@@ -167,6 +167,11 @@ class Stage:
         pixel values (they may not be computed yet); the checks of :meth:`apply` raise here as there."""
         return None
 
+    def passes_through(self, frame: RawFrame) -> bool:
+        """True when :meth:`apply` returns ``frame``'s pixels unchanged (e.g. an opcode list the file does
+        not have); False (the default) when it may change them. Reads the metadata only, as :meth:`row_op`."""
+        return False
+
     def __call__(self, frame: RawFrame, rng: np.random.Generator | None = None) -> RawFrame:
         self.check_input(frame)
         drawn = None

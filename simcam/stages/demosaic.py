@@ -43,14 +43,22 @@ class Demosaic(Stage, type="demosaic", accepts=frozenset({"raw"}), produces="cam
 
         return warm
 
-    def stream(self, frame: RawFrame, sink=None):
+    #: methods whose kernels read the mosaic strip by strip from a :class:`simcam.row_fusion.RowSource`
+    ROW_SOURCE = frozenset({"bilinear", "malvar2004"})
+
+    def stream(self, frame: RawFrame, sink=None, rows=None):
         """The kernel on ``frame``: the H x W x 3 RGB, or with ``sink`` (methods in :attr:`STREAMING`)
-        each strip's rows handed to ``sink(y0, y1, block)`` and True if a call returned True."""
+        each strip's rows handed to ``sink(y0, y1, block)`` and True if a call returned True.
+
+        ``rows``, a :class:`simcam.row_fusion.RowSource`, gives the mosaic instead of ``frame.data``
+        (the frame then only says its metadata and shape): methods in :attr:`ROW_SOURCE` make each
+        strip's rows from it, the others the whole mosaic first."""
         src = frame.meta.source or "frame"
         if frame.meta.cfa is None:
             raise StageError(f"{src}: cfa: demosaic needs a Bayer pattern (RGGB, BGGR, GRBG, GBRG), got None")
         kernel = DEMOSAIC_METHODS[self.params.method]
+        mosaic = frame.data if rows is None else rows if self.params.method in self.ROW_SOURCE else rows.materialize()
         try:
-            return kernel(frame.data, frame.meta.cfa) if sink is None else kernel(frame.data, frame.meta.cfa, sink=sink)
+            return kernel(mosaic, frame.meta.cfa) if sink is None else kernel(mosaic, frame.meta.cfa, sink=sink)
         except StageError as exc:
             raise StageError(f"{src}: {exc}") from None

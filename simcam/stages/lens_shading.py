@@ -177,6 +177,10 @@ class LensShading(Stage, type="lens_shading", accepts=frozenset({"raw"})):
         strength: float = Field(1.0, ge=0.0, le=1.0)
         mode: Literal["dng", "sidd"] = "dng"
 
+    def passes_through(self, frame: RawFrame) -> bool:
+        maps = frame.meta.gain_maps(2)
+        return not (maps if self.params.mode == "sidd" else [gm for gm in maps if gm.plane == 0])
+
     def apply(self, frame: RawFrame, drawn=None) -> RawFrame:
         if self.params.mode == "sidd":
             return self._apply_sidd(frame)

@@ -137,6 +137,9 @@ class Opcodes(Stage, type="opcodes", accepts=frozenset(_KIND.values())):
         #: WarpRectilinear resampling: 1 bilinear, 3 cubic spline
         interpolation: Literal[1, 3] = 1
 
+    def passes_through(self, frame: RawFrame) -> bool:
+        return not getattr(frame.meta, f"opcode_list{int(self.params.list)}")
+
     def apply(self, frame: RawFrame, drawn=None) -> RawFrame:
         n = int(self.params.list)
         meta = frame.meta
