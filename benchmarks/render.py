@@ -134,16 +134,19 @@ def simcam_pipeline(method: str):
 
 def simcam_render(path: Path, pipe, *, steps: dict[str, float] | None = None) -> np.ndarray:
     """DNG -> uint8 sRGB as ``simcam render`` does (:func:`simcam.render_samples.render_samples`: the demosaic
-    streamed into the fused display tail where the pipeline allows); optionally accumulate per-step seconds in
-    ``steps`` (the streamed part is one step)."""
+    streamed into the fused display tail where the pipeline allows, its raw head made strip by strip inside it);
+    optionally accumulate per-step seconds in ``steps`` (the streamed part is one step)."""
     from simcam.io.dng import read_dng
     from simcam.render_samples import fusable_tail, render_samples, streamed_demosaic
+    from simcam.row_fusion import row_source
 
     t = [_clock()]
     frame = read_dng(path)
     t[0] = _add(steps, "read_dng", t[0])
     start = fusable_tail(pipe.stages)
     k = streamed_demosaic(pipe.stages, start)
+    if k < start and k and row_source(pipe.stages[:k], frame) is not None:
+        k = 0  # the head's rows are made inside the demosaic's strips: all one step
     fused = pipe.stages[k:] if k < start else pipe.stages[start:]
     label = ("streamed: " if k < start else "fused tail: ") + " + ".join(st.type for st in fused) + " + uint8"
     seen: dict[str, int] = {}
@@ -152,8 +155,8 @@ def simcam_render(path: Path, pipe, *, steps: dict[str, float] | None = None) ->
     def progress(name: str) -> None:
         i = calls[0]
         calls[0] += 1
-        if i >= len(pipe.stages) - len(fused):  # the fused part reports its stages together, at its end
-            if i == len(pipe.stages) - len(fused):
+        if i >= len(pipe.stages) - len(fused):  # the fused part: one step, timed to its last stage's report
+            if i == len(pipe.stages) - 1:
                 t[0] = _add(steps, label, t[0])
             return
         n = seen[name] = seen.get(name, 0) + 1

@@ -26,7 +26,8 @@ def test_render_benchmark_quick_runs_and_agrees_with_libraw(tmp_path):
     for label in ("simcam bilinear", "simcam malvar2004", "rawpy LINEAR", "rawpy AHD"):
         assert f"| {label} |" in text
         assert len(res["results"][label]) == 1 and res["results"][label][0] > 0
-    assert "| streamed: demosaic + " in text and "| read_dng |" in text and "Threads:" in text
+    assert "| streamed: opcodes + normalize + " in text and " + demosaic + " in text
+    assert "| read_dng |" in text and "Threads:" in text
     # The whole simcam render (DNG read, black/white, WB, demosaic, colour, sRGB curve) agrees
     # with LibRaw's on the synthetic chart: means of the 8-bit differences away from borders.
     # Measured ~2.4 levels for Malvar vs AHD (demosaicing differences in the zone plate);
