@@ -111,7 +111,8 @@ DIAGNOSTICS = (
     "black_offset", "dark_signal_slope", "dark_variance_slope", "frame_mean_jitter", "frame_mean_drift",
     "dark_frame_jitter", "dark_tail_mass", "dark_ppcc_lambda", "code_occupancy", "lag1_corr",
     "lag2_corr", "defect_pixels", "glow_field",
-    "telegraph_pixels", "code_width_spread", "adjacent_corr", "flat_adjacent_corr", "frame_spectrum_peak",
+    "telegraph_pixels", "code_width_spread", "dark_code_split", "adjacent_corr", "flat_adjacent_corr",
+    "frame_spectrum_peak",
 )
 
 #: The bootstrap null of the diagnostic on the left is not valid while one on the right is
@@ -154,6 +155,7 @@ NEEDS = {
     "dark_ppcc_lambda": "needs a dark sequence",
     "code_occupancy": "needs a dark or flat sequence",
     "code_width_spread": "needs a dark or flat sequence",
+    "dark_code_split": "needs a dark sequence and a declared black level",
     "lag1_corr": "needs a dark sequence",
     "lag2_corr": "needs a dark sequence",
     "adjacent_corr": "needs a dark sequence",
@@ -191,6 +193,8 @@ class CaptureData:
     cfa: str | None
     cache: dict = field(default_factory=dict)
     dark_series: list | None = None
+    #: a simulated capture of the loop's bootstrap (:meth:`like`), not measured frames
+    simulated: bool = False
 
     def cached(self, key, compute):
         """``compute()`` once per capture under ``key``; a :class:`NotApplicable` it raised is kept too
@@ -225,7 +229,7 @@ class CaptureData:
             else:
                 scenes.append((f, None if sp.fixed_in_clean else sp.signal_dn))
         return CaptureData(darks, flats, scenes, self.black_dn, self.white_dn, self.cfa,
-                           dark_series=series if self.dark_series is not None else None)
+                           dark_series=series if self.dark_series is not None else None, simulated=True)
 
     # ---- shared intermediates (cached) ---------------------------------
     def temporal_residuals(self, which: str) -> list[np.ndarray]:
@@ -1491,6 +1495,56 @@ def adc_step(d: CaptureData) -> float:
     codes = code_grid_codes(d)
     gaps = np.diff(codes) if codes is not None else np.zeros(0)
     return max(float(np.median(gaps)) if gaps.size else 1.0, 1.0)
+
+
+#: share of a site's dark values that must sit on the declared black's code and one neighbour for them to be
+#: read as split between two codes (a few hot or telegraph pixels do not count)
+SPLIT_SHARE = 0.99
+
+
+def split_on_black_code(values: np.ndarray, black: float, step: float) -> bool:
+    """Whether :data:`SPLIT_SHARE` of the dark ``values`` (ADC codes ``step`` DN apart) sit on the code
+    the declared ``black`` reads as and at most one neighbour, the black's code holding at least the rest
+    (darks all on the next code up lie beyond the transition: an offset of at least a part of a code,
+    measured; values off any lattice are not codes)."""
+    v = np.asarray(values, np.float64).ravel()
+    if v.size == 0:
+        return False
+    u, n = np.unique(v, return_counts=True)
+    phase = float(u[np.argmax(n)])  # the commonest value: a code
+    r = (v - phase) / step
+    if np.mean(np.abs(r - np.round(r)) < 0.01) < SPLIT_SHARE:  # not ADC codes (values between the codes)
+        return False
+    code = phase + np.round((black - phase) / step) * step  # the black's code, on the data's lattice
+    k = np.round((v - code) / step)
+    on = k == 0
+    share = max(float(np.mean(on | (k == -1))), float(np.mean(on | (k == 1))))
+    return share >= SPLIT_SHARE and float(np.mean(on)) >= 1.0 - SPLIT_SHARE
+
+
+def dark_code_split(d: CaptureData):
+    """The share of the dark values on the code above the black's minus the share on the code below it, where
+    the darks sit on the declared black's code
+    and one neighbour of an ADC whose codes are more than 1.5 DN apart (:func:`split_on_black_code`): the
+    place of the one transition level between those codes relative to the dark level, which decides every
+    dark statistic and which a draw of the ADC's unequal codes puts anywhere within its code (IEEE Std
+    1241-2010, sec. 4.1.3: a transition level from the share of a known input below it). A simulated
+    capture (:attr:`CaptureData.simulated`) gets the same share without the split: a model whose darks
+    spread over more codes than the data's (a read noise fitted to the split darks' temporal variance
+    under ideal transitions) is the discrepancy itself."""
+    if not d.darks or d.black_dn is None:
+        return None
+    step = adc_step(d)
+    if step <= 1.5:
+        raise NotApplicable(f"the ADC's codes are {step:g} DN apart (not a coarse ADC)")
+    v = np.concatenate([np.asarray(a, np.float64).ravel() for a in d.darks])
+    black = float(np.mean(d.black_dn))
+    if not d.simulated and not split_on_black_code(v, black, step):
+        raise NotApplicable("the darks do not sit on the black's code and at most one neighbour")
+    u, n = np.unique(v, return_counts=True)
+    phase = float(u[np.argmax(n)])
+    code = phase + np.round((black - phase) / step) * step
+    return float(np.mean(v > code + step / 2) - np.mean(v < code - step / 2))
 
 
 def code_occupancy(d: CaptureData):

@@ -13,7 +13,7 @@ reads as (``LoopModel.codes``, the model's quantiser), so darks that sit on that
 offset (a 0.6-DN read noise under 14-DN codes puts every dark value of a 256-DN black on code 252: not
 a black level 4 DN low).
 
-Darks whose values (:data:`SPLIT_SHARE` of a site's) sit on the declared black's code and at most one
+Darks whose values (``diagnostics.SPLIT_SHARE`` of a site's) sit on the declared black's code and at most one
 neighbouring code (some on the black's own), on the data's own codes (``adc_step``: the step whether or not the model has it yet),
 tell only where the one transition level between those two codes lies relative to the dark level: an
 offset of the black and a displaced transition (the ADC's differential non-linearity, IEEE Std
@@ -36,36 +36,11 @@ from .. import diagnostics as dg
 from .card import DeclaredProfileCard, EffectParams, quantity
 
 
-#: share of a site's dark values that must sit on the declared black's code and one neighbour for the site's
-#: offset to be read as a transition level (module docstring): a few hot or telegraph pixels do not count
-SPLIT_SHARE = 0.99
-
-
 class BlackLevelOffset(EffectParams):
     offset_dn: list = quantity("DN", "offset of the dark level from the declared black, per 2x2 site (00, 01, 10, 11), DN",
                                profile="offset", per_full_scale=True)
     split_codes_dn: float | None = quantity("DN", "only where a site's darks sit on the declared black's code and one "
                                             "neighbour: the width of those codes", default=None)
-
-
-def split_on_black_code(values: np.ndarray, black: float, step: float) -> bool:
-    """Whether :data:`SPLIT_SHARE` of the dark ``values`` (ADC codes ``step`` DN apart) sit on the code
-    the declared ``black`` reads as and at most one neighbour, the black's code holding at least the rest
-    (darks all on the next code up lie beyond the transition: an offset of at least a part of a code,
-    measured; values off any lattice are not codes)."""
-    v = np.asarray(values, np.float64).ravel()
-    if v.size == 0:
-        return False
-    u, n = np.unique(v, return_counts=True)
-    phase = float(u[np.argmax(n)])  # the commonest value: a code
-    r = (v - phase) / step
-    if np.mean(np.abs(r - np.round(r)) < 0.01) < SPLIT_SHARE:  # not ADC codes (values between the codes)
-        return False
-    code = phase + np.round((black - phase) / step) * step  # the black's code, on the data's lattice
-    k = np.round((v - code) / step)
-    on = k == 0
-    share = max(float(np.mean(on | (k == -1))), float(np.mean(on | (k == 1))))
-    return share >= SPLIT_SHARE and float(np.mean(on)) >= 1.0 - SPLIT_SHARE
 
 
 class BlackLevelOffsetCard(DeclaredProfileCard, name="black_level_offset", params=BlackLevelOffset, diagnostics=("black_offset",),
@@ -78,7 +53,7 @@ class BlackLevelOffsetCard(DeclaredProfileCard, name="black_level_offset", param
         darks = np.concatenate(d.darks)
         out, split = [], False
         for dy, dx in dg.PLANE_OFFSETS:
-            if split_on_black_code(darks[:, dy::2, dx::2], float(black[dy, dx]), step):
+            if dg.split_on_black_code(darks[:, dy::2, dx::2], float(black[dy, dx]), step):
                 out.append(0.0)
                 split = True
             else:

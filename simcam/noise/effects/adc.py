@@ -15,6 +15,10 @@ It is the capture's ADC: the output is the code, back in normalised raw. A coars
 too: its transition levels sit off by fractions of its own code, ``step_dn`` DN wide. Beside a
 ``quantization`` of the same step, list ``adc_dnl`` first: its codes are on the quantiser's grid, which
 then leaves them as they are.
+
+Measured transition levels (``edges_dn``, DN) replace the drawn offsets of the transitions nearest
+them: a calibration that located some of this sensor's transitions (``simcam loop``: the one dark
+frames straddle, when they sit on two codes of a coarse ADC) keeps them, the others stay random.
 """
 
 from __future__ import annotations
@@ -44,6 +48,9 @@ class AdcDnl(Effect):
     step_dn : float
         Width of one code in DN (1: codes are DN; a coarse ADC's code is ``step_dn`` DN, its output
         ``code * step_dn`` DN).
+    edges_dn : list of float
+        Measured transition levels (DN), each replacing the drawn offset of the nearest transition
+        (transition k, between codes k and k + 1, ideally at ``(k + 1/2) step_dn``).
     """
 
     type: Literal["adc_dnl"] = "adc_dnl"
@@ -53,10 +60,15 @@ class AdcDnl(Effect):
     bits: int = Field(12, ge=1, le=20)
     dnl_sigma: float = Field(0.2, ge=0, le=2.0)
     step_dn: float = Field(1.0, ge=1.0)
+    edges_dn: list[float] = Field(default_factory=list)
 
     def fixed(self, shape, rng):
         n = 2 ** int(self.bits)
         u = self.dnl_sigma * rng.standard_normal(n - 1)
+        for e in self.edges_dn:  # in codes: transition k (between codes k and k + 1) ideally at k + 1/2
+            k = int(np.floor(float(e) / self.step_dn))
+            if 0 <= k < n - 1:
+                u[k] = float(e) / self.step_dn - (k + 0.5)
         return {"edges": np.sort(np.arange(n - 1) + 0.5 + u)}
 
     def codes(self, x: np.ndarray, edges: np.ndarray) -> np.ndarray:
