@@ -1502,6 +1502,14 @@ def adc_step(d: CaptureData) -> float:
 SPLIT_SHARE = 0.99
 
 
+def black_code(values: np.ndarray, black: float, step: float) -> tuple[float, float]:
+    """``(phase, code)``: a code of the data's lattice (the commonest of ``values``, codes ``step`` DN apart)
+    and the code the declared ``black`` reads as on it."""
+    u, n = np.unique(np.asarray(values, np.float64).ravel(), return_counts=True)
+    phase = float(u[np.argmax(n)])
+    return phase, float(phase + np.round((black - phase) / step) * step)
+
+
 def split_on_black_code(values: np.ndarray, black: float, step: float) -> bool:
     """Whether :data:`SPLIT_SHARE` of the dark ``values`` (ADC codes ``step`` DN apart) sit on the code
     the declared ``black`` reads as and at most one neighbour, the black's code holding at least the rest
@@ -1510,12 +1518,10 @@ def split_on_black_code(values: np.ndarray, black: float, step: float) -> bool:
     v = np.asarray(values, np.float64).ravel()
     if v.size == 0:
         return False
-    u, n = np.unique(v, return_counts=True)
-    phase = float(u[np.argmax(n)])  # the commonest value: a code
+    phase, code = black_code(v, black, step)
     r = (v - phase) / step
     if np.mean(np.abs(r - np.round(r)) < 0.01) < SPLIT_SHARE:  # not ADC codes (values between the codes)
         return False
-    code = phase + np.round((black - phase) / step) * step  # the black's code, on the data's lattice
     k = np.round((v - code) / step)
     on = k == 0
     share = max(float(np.mean(on | (k == -1))), float(np.mean(on | (k == 1))))
@@ -1524,9 +1530,9 @@ def split_on_black_code(values: np.ndarray, black: float, step: float) -> bool:
 
 def dark_code_split(d: CaptureData):
     """The share of the dark values on the code above the black's minus the share on the code below it, where
-    the darks sit on the declared black's code
-    and one neighbour of an ADC whose codes are more than 1.5 DN apart (:func:`split_on_black_code`): the
-    place of the one transition level between those codes relative to the dark level, which decides every
+    the darks sit on the declared black's code and one neighbour of an ADC whose codes are more than 1.5 DN
+    apart (:func:`split_on_black_code`): the place of the one transition level between those codes
+    relative to the dark level, which decides every
     dark statistic and which a draw of the ADC's unequal codes puts anywhere within its code (IEEE Std
     1241-2010, sec. 4.1.3: a transition level from the share of a known input below it). A simulated
     capture (:attr:`CaptureData.simulated`) gets the same share without the split: a model whose darks
@@ -1541,9 +1547,7 @@ def dark_code_split(d: CaptureData):
     black = float(np.mean(d.black_dn))
     if not d.simulated and not split_on_black_code(v, black, step):
         raise NotApplicable("the darks do not sit on the black's code and at most one neighbour")
-    u, n = np.unique(v, return_counts=True)
-    phase = float(u[np.argmax(n)])
-    code = phase + np.round((black - phase) / step) * step
+    code = black_code(v, black, step)[1]
     return float(np.mean(v > code + step / 2) - np.mean(v < code - step / 2))
 
 
