@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .frame import RawFrame
-from .row_fusion import row_source
+from .row_fusion import row_source, stand_in
 
 _LINEAR = ("camera_to_xyz", "xyz_to_srgb", "tone")
 #: stages that act on each pixel alone (no neighbours, no randomness), so they can run on row bands
@@ -306,8 +306,7 @@ def render_demosaic_tail(middle, tail, frame: RawFrame, depth: str, *, target=No
     meta = frame.meta
     for st in middle[1:]:
         if st.type == "crop":  # a stand-in frame of the current size: the crop's checks without pixels
-            proxy = RawFrame(np.broadcast_to(np.zeros((1, 1, 3), np.float32), (bottom - top, right - left, 3)), meta,
-                             kind=kind)
+            proxy = RawFrame(stand_in((bottom - top, right - left, 3)), meta, kind=kind)
             st.check_input(proxy)
             (t, l, b, r), meta = st.plan(proxy)
             top, left, bottom, right = top + t, left + l, top + b, left + r

@@ -76,8 +76,7 @@ def _run_rows(ops, src: np.ndarray, out: np.ndarray) -> None:
             op.fn(dst, dst, r0)
 
 
-
-def _proxy(shape) -> np.ndarray:
+def stand_in(shape) -> np.ndarray:
     """A read-only float32 stand-in of ``shape`` (no memory): what a planned stage sees as its pixels."""
     return np.broadcast_to(np.zeros((1,) * len(shape), np.float32), tuple(shape))
 
@@ -111,7 +110,7 @@ class RowSource:
             for op in ops:
                 if not made:
                     buf = getattr(self.local, "buf", None)
-                    if buf is None or buf.shape[0] < n or buf.shape[1] < cur.shape[1]:
+                    if buf is None or buf.shape[0] < n:  # its width is the source's, the widest
                         buf = self.local.buf = np.empty((max(n, BAND_ROWS), self.data.shape[1]), np.float32)
                     op.fn(cur, buf[:n, :cur.shape[1]], r0)
                     cur, made = buf[:n, :cur.shape[1]], True
@@ -137,7 +136,7 @@ def row_source(stages, frame: RawFrame, progress=None) -> tuple[RowSource, RawFr
     crop or passes the frame through, and none draws random numbers. The stages' checks raise here as
     when they run; ``progress`` is called with each stage's type."""
     segments, ops = [], []
-    result = frame.evolve(_proxy(frame.data.shape))
+    result = frame.evolve(stand_in(frame.data.shape))
     for st in stages:
         if st.random:
             return None
@@ -145,12 +144,12 @@ def row_source(stages, frame: RawFrame, progress=None) -> tuple[RowSource, RawFr
         op = st.row_op(result)
         if op is not None:
             ops.append(op)
-            result = op.result(result, _proxy(result.data.shape))
+            result = op.result(result, stand_in(result.data.shape))
         elif st.type == "crop":
             (top, left, bottom, right), meta = st.plan(result)
             segments.append((ops, (top, left, right - left)))
             ops = []
-            result = result.evolve(_proxy((bottom - top, right - left)), meta=meta, step=st.type)
+            result = result.evolve(stand_in((bottom - top, right - left)), meta=meta, step=st.type)
         elif st.passes_through(result):
             result = st(result)
         else:

@@ -33,25 +33,19 @@ def check_mosaic(mosaic, cfa: str, method: str) -> tuple[np.ndarray, str]:
     """Validate a mosaic and pattern; return (float32 C-contiguous mosaic, pattern). A row source (an
     object with ``shape`` and ``rows(a, b)`` giving float32 mosaic rows ``[a, b)`` on demand, e.g.
     :class:`simcam.row_fusion.RowSource`) is kept as it is."""
-    if is_row_source(mosaic):
-        if mosaic.shape[0] < 2 or mosaic.shape[1] < 2:
-            raise StageError(f"demosaic ({method}): mosaic: expected at least 2 x 2 pixels, got shape {mosaic.shape}")
-        try:
-            return mosaic, check_pattern(cfa, where=f"demosaic ({method}): cfa")
-        except CfaError as exc:
-            raise StageError(str(exc)) from None
-    arr = np.asarray(mosaic)
-    if arr.ndim != 2:
+    source = is_row_source(mosaic)
+    arr = mosaic if source else np.asarray(mosaic)
+    if not source and arr.ndim != 2:
         raise StageError(f"demosaic ({method}): mosaic: expected a 2-D H x W array, got shape {arr.shape}")
     if arr.shape[0] < 2 or arr.shape[1] < 2:
         raise StageError(f"demosaic ({method}): mosaic: expected at least 2 x 2 pixels, got shape {arr.shape}")
-    if not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
+    if not source and (not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr)):
         raise StageError(f"demosaic ({method}): mosaic: expected real numbers, got dtype {arr.dtype}")
     try:
         pattern = check_pattern(cfa, where=f"demosaic ({method}): cfa")
     except CfaError as exc:  # a demosaic kernel's input error is a stage error
         raise StageError(str(exc)) from None
-    return np.ascontiguousarray(arr, dtype=np.float32), pattern
+    return (arr if source else np.ascontiguousarray(arr, dtype=np.float32)), pattern
 
 
 def is_row_source(mosaic) -> bool:
@@ -73,14 +67,11 @@ def _runs(idx: np.ndarray) -> tuple[int, int]:
     return (int(inner[0]), int(inner[-1]) + 2) if inner.size else (0, 0)
 
 
-def _gather(m: np.ndarray, rows: np.ndarray, cols: np.ndarray, out: np.ndarray | None = None,
-            col_run: tuple[int, int] | None = None) -> np.ndarray:
-    """``m[np.ix_(rows, cols)]`` (into ``out`` if given) where ``rows``/``cols`` are stride-2 runs with a
-    few mirrored entries at each end: the bulk is one strided copy."""
-    if out is None:
-        out = np.empty((rows.size, cols.size), dtype=np.float32)
+def _gather(m: np.ndarray, rows: np.ndarray, cols: np.ndarray, out: np.ndarray, col_run: tuple[int, int]) -> np.ndarray:
+    """``m[np.ix_(rows, cols)]`` into ``out`` where ``rows``/``cols`` are stride-2 runs with a few mirrored
+    entries at each end (``col_run``: ``_runs(cols)``): the bulk is one strided copy."""
     ra, rb = _runs(rows)
-    ca, cb = _runs(cols) if col_run is None else col_run
+    ca, cb = col_run
     if rb > ra and cb > ca:
         out[ra:rb, ca:cb] = m[rows[ra]:rows[rb - 1] + 1:2, cols[ca]:cols[cb - 1] + 1:2]
     else:

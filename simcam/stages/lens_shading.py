@@ -182,11 +182,11 @@ class LensShading(Stage, type="lens_shading", accepts=frozenset({"raw"})):
         return not (maps if self.params.mode == "sidd" else [gm for gm in maps if gm.plane == 0])
 
     def apply(self, frame: RawFrame, drawn=None) -> RawFrame:
+        if self.passes_through(frame):
+            return frame.evolve(step=f"{self.type}(no GainMaps)")
         if self.params.mode == "sidd":
             return self._apply_sidd(frame)
         maps = [gm for gm in frame.meta.gain_maps(2) if gm.plane == 0]
-        if not maps:
-            return frame.evolve(step=f"{self.type}(no GainMaps)")
         s = float(self.params.strength)
         out = np.array(frame.data, dtype=np.float32, copy=True)
         bounds = opcode_image_bounds(frame.meta, out.shape)  # once: a file may hold thousands of maps
@@ -200,8 +200,6 @@ class LensShading(Stage, type="lens_shading", accepts=frozenset({"raw"})):
 
     def _apply_sidd(self, frame: RawFrame) -> RawFrame:
         maps = frame.meta.gain_maps(2)
-        if not maps:
-            return frame.evolve(step=f"{self.type}(no GainMaps)")
         h2, w2 = frame.height // 2, frame.width // 2
         gain = resize_linear_half_pixel(maps[0].gains[:, :, 0].astype(np.float64), h2, w2)
         gain = (1.0 + float(self.params.strength) * (gain - 1.0)).astype(np.float32)
